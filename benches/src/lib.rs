@@ -1,0 +1,1 @@
+//! Shared scene and workload generators for the frcd criterion benches and `cargo xtask bench`.

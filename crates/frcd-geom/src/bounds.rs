@@ -1,0 +1,291 @@
+use crate::Pose;
+use glam::{DMat3, DVec3};
+
+/// An axis-aligned box `[min, max]` (closed). An empty box has `min > max`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct Aabb {
+    /// Lower corner.
+    pub min: DVec3,
+    /// Upper corner.
+    pub max: DVec3,
+}
+
+impl Aabb {
+    /// The empty box (identity for [`Aabb::union`]).
+    pub const EMPTY: Aabb = Aabb {
+        min: DVec3::splat(f64::INFINITY),
+        max: DVec3::splat(f64::NEG_INFINITY),
+    };
+
+    /// A box from two corners.
+    #[inline]
+    pub fn new(min: DVec3, max: DVec3) -> Self {
+        Self { min, max }
+    }
+
+    /// The smallest box holding all points (empty for no points).
+    pub fn from_points<'a>(points: impl IntoIterator<Item = &'a DVec3>) -> Self {
+        points.into_iter().fold(Self::EMPTY, |b, p| b.grown(*p))
+    }
+
+    /// True when the box holds no point.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.min.x > self.max.x || self.min.y > self.max.y || self.min.z > self.max.z
+    }
+
+    /// This box grown to hold `p`.
+    #[inline]
+    pub fn grown(&self, p: DVec3) -> Self {
+        Self {
+            min: self.min.min(p),
+            max: self.max.max(p),
+        }
+    }
+
+    /// The smallest box holding both.
+    #[inline]
+    pub fn union(&self, other: &Aabb) -> Self {
+        Self {
+            min: self.min.min(other.min),
+            max: self.max.max(other.max),
+        }
+    }
+
+    /// The intersection (possibly empty).
+    #[inline]
+    pub fn intersection(&self, other: &Aabb) -> Self {
+        Self {
+            min: self.min.max(other.min),
+            max: self.max.min(other.max),
+        }
+    }
+
+    /// True when the closed boxes share a point.
+    #[inline]
+    pub fn intersects(&self, other: &Aabb) -> bool {
+        self.min.x <= other.max.x
+            && other.min.x <= self.max.x
+            && self.min.y <= other.max.y
+            && other.min.y <= self.max.y
+            && self.min.z <= other.max.z
+            && other.min.z <= self.max.z
+    }
+
+    /// True when `p` lies in the closed box.
+    #[inline]
+    pub fn contains_point(&self, p: DVec3) -> bool {
+        p.cmpge(self.min).all() && p.cmple(self.max).all()
+    }
+
+    /// The centre.
+    #[inline]
+    pub fn center(&self) -> DVec3 {
+        0.5 * (self.min + self.max)
+    }
+
+    /// Half the side lengths.
+    #[inline]
+    pub fn half_extents(&self) -> DVec3 {
+        0.5 * (self.max - self.min)
+    }
+
+    /// The box grown by `margin` on every side.
+    #[inline]
+    pub fn inflated(&self, margin: f64) -> Self {
+        Self {
+            min: self.min - DVec3::splat(margin),
+            max: self.max + DVec3::splat(margin),
+        }
+    }
+
+    /// A box holding this box after the pose is applied (the box of the rotated box), grown by a
+    /// relative 4 ulp so rounding cannot make it smaller than the exact one.
+    pub fn transformed(&self, pose: &Pose) -> Self {
+        if self.is_empty() {
+            return *self;
+        }
+        let m = pose.rotation_matrix();
+        let c = pose.transform_point(self.center());
+        let h = self.half_extents();
+        let abs = DMat3::from_cols(m.x_axis.abs(), m.y_axis.abs(), m.z_axis.abs());
+        let e = abs * h;
+        let slack = (c.abs() + e) * (4.0 * f64::EPSILON);
+        Self {
+            min: c - e - slack,
+            max: c + e + slack,
+        }
+    }
+
+    /// Volume (0 for an empty box).
+    #[inline]
+    pub fn volume(&self) -> f64 {
+        if self.is_empty() {
+            0.0
+        } else {
+            (self.max - self.min).element_product()
+        }
+    }
+}
+
+/// A sphere (closed ball).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct Sphere {
+    /// Centre.
+    pub center: DVec3,
+    /// Radius (≥ 0).
+    pub radius: f64,
+}
+
+impl Sphere {
+    /// A sphere from centre and radius.
+    #[inline]
+    pub fn new(center: DVec3, radius: f64) -> Self {
+        Self { center, radius }
+    }
+
+    /// A sphere holding all points: Ritter's bounding sphere, then grown by a relative 1e-12 so
+    /// rounding never leaves a point outside. Returns a zero sphere at the origin for no points.
+    pub fn from_points(points: &[DVec3]) -> Self {
+        let Some(&p0) = points.first() else {
+            return Self::new(DVec3::ZERO, 0.0);
+        };
+        let far = |from: DVec3| {
+            points.iter().copied().fold(from, |best, p| {
+                if p.distance_squared(from) > best.distance_squared(from) {
+                    p
+                } else {
+                    best
+                }
+            })
+        };
+        let a = far(p0);
+        let b = far(a);
+        let mut center = 0.5 * (a + b);
+        let mut radius = 0.5 * a.distance(b);
+        for &p in points {
+            let d = p.distance(center);
+            if d > radius {
+                let new_r = 0.5 * (radius + d);
+                center += (p - center) * ((new_r - radius) / d);
+                radius = new_r;
+            }
+        }
+        let scale = center.abs().max_element().max(radius);
+        Self::new(center, radius + scale * 1e-12)
+    }
+
+    /// True when the closed balls share a point.
+    #[inline]
+    pub fn intersects(&self, other: &Sphere) -> bool {
+        let r = self.radius + other.radius;
+        self.center.distance_squared(other.center) <= r * r
+    }
+
+    /// The sphere mapped by a rigid pose.
+    #[inline]
+    pub fn transformed(&self, pose: &Pose) -> Self {
+        Self::new(pose.transform_point(self.center), self.radius)
+    }
+}
+
+/// An oriented box: centre, orthonormal axes (the columns of `axes`) and half extents along them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct Obb {
+    /// Centre.
+    pub center: DVec3,
+    /// Orthonormal axes as columns, right-handed.
+    pub axes: DMat3,
+    /// Half extents along `axes.x_axis`, `axes.y_axis`, `axes.z_axis` (≥ 0).
+    pub half_extents: DVec3,
+}
+
+impl Obb {
+    /// The tightest box with the given orthonormal axes that holds all points, grown by a relative
+    /// few ulp so that rounding in the projections cannot leave a point outside.
+    ///
+    /// ```
+    /// use frcd_geom::{Obb, DMat3, DVec3};
+    /// let pts = [DVec3::ZERO, DVec3::new(2.0, 1.0, 0.5)];
+    /// let obb = Obb::from_points_with_axes(&pts, DMat3::IDENTITY);
+    /// assert!((obb.center - DVec3::new(1.0, 0.5, 0.25)).length() < 1e-12);
+    /// assert!(obb.contains_point(pts[1]));
+    /// ```
+    pub fn from_points_with_axes(points: &[DVec3], axes: DMat3) -> Self {
+        let t = axes.transpose();
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        for &p in points {
+            let q = t * p;
+            lo = lo.min(q);
+            hi = hi.max(q);
+        }
+        if points.is_empty() {
+            return Self {
+                center: DVec3::ZERO,
+                axes,
+                half_extents: DVec3::ZERO,
+            };
+        }
+        let mid = 0.5 * (lo + hi);
+        let half = 0.5 * (hi - lo);
+        // Rounding of the projections and of the centre reconstruction: a few ulp of the largest
+        // magnitude involved.
+        let mag = lo.abs().max(hi.abs()).max_element();
+        let slack = mag * (8.0 * f64::EPSILON);
+        Self {
+            center: axes * mid,
+            axes,
+            half_extents: half + DVec3::splat(slack),
+        }
+    }
+
+    /// The axis-aligned box of this OBB.
+    pub fn aabb(&self) -> Aabb {
+        let abs = DMat3::from_cols(
+            self.axes.x_axis.abs(),
+            self.axes.y_axis.abs(),
+            self.axes.z_axis.abs(),
+        );
+        let e = abs * self.half_extents;
+        Aabb::new(self.center - e, self.center + e)
+    }
+
+    /// True when `p` lies in the closed box (rounded arithmetic).
+    pub fn contains_point(&self, p: DVec3) -> bool {
+        let d = self.axes.transpose() * (p - self.center);
+        d.abs().cmple(self.half_extents).all()
+    }
+
+    /// The eight corners.
+    pub fn corners(&self) -> [DVec3; 8] {
+        let mut out = [DVec3::ZERO; 8];
+        for (i, c) in out.iter_mut().enumerate() {
+            let s = DVec3::new(
+                if i & 1 == 0 { -1.0 } else { 1.0 },
+                if i & 2 == 0 { -1.0 } else { 1.0 },
+                if i & 4 == 0 { -1.0 } else { 1.0 },
+            );
+            *c = self.center + self.axes * (s * self.half_extents);
+        }
+        out
+    }
+
+    /// Volume.
+    #[inline]
+    pub fn volume(&self) -> f64 {
+        8.0 * self.half_extents.element_product()
+    }
+
+    /// The OBB mapped by a rigid pose.
+    pub fn transformed(&self, pose: &Pose) -> Self {
+        Self {
+            center: pose.transform_point(self.center),
+            axes: pose.rotation_matrix() * self.axes,
+            half_extents: self.half_extents,
+        }
+    }
+}

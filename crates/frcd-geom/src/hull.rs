@@ -1,0 +1,1 @@
+//! Robust 3D convex hull.

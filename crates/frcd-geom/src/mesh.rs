@@ -1,0 +1,359 @@
+use crate::{Aabb, Topology, Triangle, predicates};
+use glam::DVec3;
+use std::collections::HashMap;
+use std::sync::OnceLock;
+
+/// Why a mesh was refused. Each variant names the offending element.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum MeshError {
+    /// The mesh has no triangles (or no vertices).
+    #[error("empty mesh: {vertices} vertices, {triangles} triangles")]
+    Empty {
+        /// Number of vertices given.
+        vertices: usize,
+        /// Number of triangles given.
+        triangles: usize,
+    },
+    /// A vertex coordinate is NaN or infinite.
+    #[error("vertex {vertex} has a non-finite coordinate: {value:?}")]
+    NonFiniteVertex {
+        /// Index of the vertex.
+        vertex: usize,
+        /// The vertex as given.
+        value: [f64; 3],
+    },
+    /// A triangle refers to a vertex that does not exist.
+    #[error(
+        "triangle {triangle}, corner {corner}: index {index} out of range (mesh has {vertex_count} vertices)"
+    )]
+    IndexOutOfRange {
+        /// Index of the triangle.
+        triangle: usize,
+        /// Which corner (0, 1, 2).
+        corner: usize,
+        /// The bad index.
+        index: u32,
+        /// Number of vertices.
+        vertex_count: usize,
+    },
+    /// More vertices or triangles than 32-bit indices can address.
+    #[error("too many elements: {what} = {count} exceeds u32")]
+    TooLarge {
+        /// "vertices" or "triangles".
+        what: &'static str,
+        /// The count given.
+        count: usize,
+    },
+}
+
+/// What validation found that does not make a mesh unusable, reported rather than dropped.
+#[derive(Clone, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct MeshReport {
+    /// Triangles of exactly zero area (collinear or repeated vertices), by index.
+    pub degenerate: Vec<u32>,
+    /// Pairs `(first, later)` of triangles with the same three vertex indices (any order).
+    pub duplicates: Vec<(u32, u32)>,
+    /// Vertices no triangle refers to.
+    pub unreferenced_vertices: usize,
+}
+
+impl MeshReport {
+    /// True when nothing was found.
+    pub fn is_clean(&self) -> bool {
+        self.degenerate.is_empty() && self.duplicates.is_empty() && self.unreferenced_vertices == 0
+    }
+}
+
+/// A validated indexed triangle mesh (f64 vertices, `u32` indices).
+///
+/// Construction checks every index and coordinate and returns a typed [`MeshError`]; degenerate and
+/// duplicate triangles are kept and listed in [`TriMesh::report`]. The topology report is computed
+/// on first use and cached.
+///
+/// ```
+/// use frcd_geom::{TriMesh, MeshError, DVec3};
+/// let v = vec![DVec3::ZERO, DVec3::X, DVec3::Y];
+/// let mesh = TriMesh::new(v.clone(), vec![[0, 1, 2]]).unwrap();
+/// assert_eq!(mesh.triangle_count(), 1);
+/// assert!(matches!(TriMesh::new(v, vec![[0, 1, 3]]),
+///     Err(MeshError::IndexOutOfRange { triangle: 0, corner: 2, index: 3, .. })));
+/// ```
+#[derive(Debug)]
+pub struct TriMesh {
+    vertices: Vec<DVec3>,
+    indices: Vec<[u32; 3]>,
+    report: MeshReport,
+    aabb: Aabb,
+    topology: OnceLock<Topology>,
+}
+
+impl Clone for TriMesh {
+    fn clone(&self) -> Self {
+        Self {
+            vertices: self.vertices.clone(),
+            indices: self.indices.clone(),
+            report: self.report.clone(),
+            aabb: self.aabb,
+            topology: self.topology.clone(),
+        }
+    }
+}
+
+impl TriMesh {
+    /// Validates and builds a mesh. Vertices are used as given (no welding): see
+    /// [`TriMesh::from_triangle_soup`] and [`TriMesh::welded`] for that.
+    pub fn new(vertices: Vec<DVec3>, indices: Vec<[u32; 3]>) -> Result<Self, MeshError> {
+        if vertices.is_empty() || indices.is_empty() {
+            return Err(MeshError::Empty {
+                vertices: vertices.len(),
+                triangles: indices.len(),
+            });
+        }
+        if vertices.len() > u32::MAX as usize {
+            return Err(MeshError::TooLarge {
+                what: "vertices",
+                count: vertices.len(),
+            });
+        }
+        if indices.len() > u32::MAX as usize {
+            return Err(MeshError::TooLarge {
+                what: "triangles",
+                count: indices.len(),
+            });
+        }
+        if let Some((i, p)) = vertices.iter().enumerate().find(|(_, p)| !p.is_finite()) {
+            return Err(MeshError::NonFiniteVertex {
+                vertex: i,
+                value: p.to_array(),
+            });
+        }
+        let n = vertices.len();
+        for (t, tri) in indices.iter().enumerate() {
+            for (corner, &index) in tri.iter().enumerate() {
+                if index as usize >= n {
+                    return Err(MeshError::IndexOutOfRange {
+                        triangle: t,
+                        corner,
+                        index,
+                        vertex_count: n,
+                    });
+                }
+            }
+        }
+        let report = Self::inspect(&vertices, &indices);
+        let aabb = Aabb::from_points(vertices.iter());
+        Ok(Self {
+            vertices,
+            indices,
+            report,
+            aabb,
+            topology: OnceLock::new(),
+        })
+    }
+
+    fn inspect(vertices: &[DVec3], indices: &[[u32; 3]]) -> MeshReport {
+        let mut report = MeshReport::default();
+        let mut seen: HashMap<[u32; 3], u32> = HashMap::with_capacity(indices.len());
+        let mut used = vec![false; vertices.len()];
+        for (t, tri) in indices.iter().enumerate() {
+            let [a, b, c] = tri.map(|i| vertices[i as usize]);
+            if predicates::collinear3(a, b, c) {
+                report.degenerate.push(t as u32);
+            }
+            let mut key = *tri;
+            key.sort_unstable();
+            if let Some(&first) = seen.get(&key) {
+                report.duplicates.push((first, t as u32));
+            } else {
+                seen.insert(key, t as u32);
+            }
+            for &i in tri {
+                used[i as usize] = true;
+            }
+        }
+        report.unreferenced_vertices = used.iter().filter(|u| !**u).count();
+        report
+    }
+
+    /// Builds a mesh from unindexed triangles (STL), welding vertices with bit-identical
+    /// coordinates (`-0.0` and `0.0` are the same point).
+    ///
+    /// ```
+    /// use frcd_geom::{TriMesh, DVec3};
+    /// let (a, b, c, d) = (DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z);
+    /// let m = TriMesh::from_triangle_soup(&[[a, b, c], [a, c, d]]).unwrap();
+    /// assert_eq!(m.vertex_count(), 4);
+    /// ```
+    pub fn from_triangle_soup(triangles: &[[DVec3; 3]]) -> Result<Self, MeshError> {
+        let mut map: HashMap<[u64; 3], u32> = HashMap::with_capacity(triangles.len());
+        let mut vertices = Vec::new();
+        let mut indices = Vec::with_capacity(triangles.len());
+        for tri in triangles {
+            let mut idx = [0u32; 3];
+            for (k, p) in tri.iter().enumerate() {
+                let key = position_key(*p);
+                idx[k] = *map.entry(key).or_insert_with(|| {
+                    vertices.push(*p);
+                    (vertices.len() - 1) as u32
+                });
+            }
+            indices.push(idx);
+        }
+        Self::new(vertices, indices)
+    }
+
+    /// A copy with vertices closer than `tolerance` (Euclidean, transitively) merged into one, and
+    /// unreferenced vertices dropped. `tolerance = 0` merges bit-identical positions only.
+    /// Triangles are kept (a triangle may become degenerate; the report says so).
+    pub fn welded(&self, tolerance: f64) -> Self {
+        let n = self.vertices.len();
+        let mut parent: Vec<u32> = (0..n as u32).collect();
+        fn find(p: &mut [u32], mut i: u32) -> u32 {
+            while p[i as usize] != i {
+                p[i as usize] = p[p[i as usize] as usize];
+                i = p[i as usize];
+            }
+            i
+        }
+        if tolerance > 0.0 {
+            let cell = tolerance;
+            let key = |p: DVec3| ((p / cell).floor()).as_i64vec3().to_array();
+            let mut grid: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
+            for (i, p) in self.vertices.iter().enumerate() {
+                grid.entry(key(*p)).or_default().push(i as u32);
+            }
+            let t2 = tolerance * tolerance;
+            for (i, p) in self.vertices.iter().enumerate() {
+                let k = key(*p);
+                for dx in -1..=1 {
+                    for dy in -1..=1 {
+                        for dz in -1..=1 {
+                            if let Some(list) = grid.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
+                                for &j in list {
+                                    if (j as usize) > i
+                                        && self.vertices[j as usize].distance_squared(*p) <= t2
+                                    {
+                                        let (a, b) =
+                                            (find(&mut parent, i as u32), find(&mut parent, j));
+                                        if a != b {
+                                            parent[a.max(b) as usize] = a.min(b);
+                                        }
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        } else {
+            let mut map: HashMap<[u64; 3], u32> = HashMap::new();
+            for (i, p) in self.vertices.iter().enumerate() {
+                let first = *map.entry(position_key(*p)).or_insert(i as u32);
+                parent[i] = first;
+            }
+        }
+        let mut remap = vec![u32::MAX; n];
+        let mut vertices = Vec::new();
+        let indices: Vec<[u32; 3]> = self
+            .indices
+            .iter()
+            .map(|tri| {
+                tri.map(|i| {
+                    let root = find(&mut parent, i) as usize;
+                    if remap[root] == u32::MAX {
+                        remap[root] = vertices.len() as u32;
+                        vertices.push(self.vertices[root]);
+                    }
+                    remap[root]
+                })
+            })
+            .collect();
+        Self::new(vertices, indices).expect("welding a valid mesh keeps it valid")
+    }
+
+    /// The vertices.
+    #[inline]
+    pub fn vertices(&self) -> &[DVec3] {
+        &self.vertices
+    }
+
+    /// The triangles as vertex-index triples.
+    #[inline]
+    pub fn indices(&self) -> &[[u32; 3]] {
+        &self.indices
+    }
+
+    /// Number of vertices.
+    #[inline]
+    pub fn vertex_count(&self) -> usize {
+        self.vertices.len()
+    }
+
+    /// Number of triangles.
+    #[inline]
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len()
+    }
+
+    /// Triangle `i` with its vertex positions. Panics if `i` is out of range (a programming
+    /// error: indices come from this mesh).
+    #[inline]
+    pub fn triangle(&self, i: usize) -> Triangle {
+        let [a, b, c] = self.indices[i];
+        Triangle::new(
+            self.vertices[a as usize],
+            self.vertices[b as usize],
+            self.vertices[c as usize],
+        )
+    }
+
+    /// All triangles with positions.
+    pub fn triangles(&self) -> impl ExactSizeIterator<Item = Triangle> + '_ {
+        (0..self.indices.len()).map(|i| self.triangle(i))
+    }
+
+    /// What validation found (degenerate, duplicate triangles; unreferenced vertices).
+    #[inline]
+    pub fn report(&self) -> &MeshReport {
+        &self.report
+    }
+
+    /// The axis-aligned box of the vertices.
+    #[inline]
+    pub fn aabb(&self) -> Aabb {
+        self.aabb
+    }
+
+    /// The topology report (computed once, then cached).
+    pub fn topology(&self) -> &Topology {
+        self.topology
+            .get_or_init(|| Topology::compute(&self.vertices, &self.indices))
+    }
+
+    /// Signed volume by the divergence theorem (positive for a closed mesh with outward normals).
+    pub fn signed_volume(&self) -> f64 {
+        // Relative to the box centre to limit cancellation for large offsets.
+        let o = self.aabb.center();
+        self.triangles()
+            .map(|t| (t.v[0] - o).dot((t.v[1] - o).cross(t.v[2] - o)))
+            .sum::<f64>()
+            / 6.0
+    }
+
+    /// A copy with every vertex mapped by `pose`.
+    pub fn transformed(&self, pose: &crate::Pose) -> Self {
+        let v = self
+            .vertices
+            .iter()
+            .map(|p| pose.transform_point(*p))
+            .collect();
+        Self::new(v, self.indices.clone()).expect("a rigid map keeps a valid mesh valid")
+    }
+}
+
+/// Hash key of a position: the bit patterns, with -0.0 folded to 0.0.
+fn position_key(p: DVec3) -> [u64; 3] {
+    p.to_array()
+        .map(|x| if x == 0.0 { 0u64 } else { x.to_bits() })
+}

@@ -1,0 +1,1 @@
+//! frcd-gpgpu (work in progress).

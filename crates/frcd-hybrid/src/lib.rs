@@ -1,0 +1,1 @@
+//! frcd-hybrid (work in progress).

@@ -1,0 +1,1 @@
+//! frcd-image (work in progress).

@@ -1,0 +1,1 @@
+//! frcd-io (work in progress).
