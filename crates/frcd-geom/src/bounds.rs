@@ -100,18 +100,24 @@ impl Aabb {
         }
     }
 
-    /// A box holding this box after the pose is applied (the box of the rotated box), grown by a
-    /// relative 4 ulp so rounding cannot make it smaller than the exact one.
+    /// A box holding this box after the pose is applied (the box of the rotated box), grown so
+    /// that rounding cannot make it smaller than the exact one: the slack is a few ulp of every
+    /// magnitude that was rounded on the way, including the local centre and the translation,
+    /// which may be large even when they cancel (a body far from its frame's origin posed back
+    /// near the world origin).
     pub fn transformed(&self, pose: &Pose) -> Self {
         if self.is_empty() {
             return *self;
         }
         let m = pose.rotation_matrix();
-        let c = pose.transform_point(self.center());
+        let local_c = self.center();
+        let c = pose.transform_point(local_c);
         let h = self.half_extents();
         let abs = DMat3::from_cols(m.x_axis.abs(), m.y_axis.abs(), m.z_axis.abs());
         let e = abs * h;
-        let slack = (c.abs() + e) * (4.0 * f64::EPSILON);
+        let local = local_c.length() + h.length();
+        let slack =
+            (c.abs() + e + pose.translation.abs() + DVec3::splat(local)) * (16.0 * f64::EPSILON);
         Self {
             min: c - e - slack,
             max: c + e + slack,
@@ -232,10 +238,15 @@ impl Obb {
         }
         let mid = 0.5 * (lo + hi);
         let half = 0.5 * (hi - lo);
-        // Rounding of the projections and of the centre reconstruction: a few ulp of the largest
-        // magnitude involved.
-        let mag = lo.abs().max(hi.abs()).max_element();
-        let slack = mag * (8.0 * f64::EPSILON);
+        // Rounding of the projections (each ≤ 3 ulp of |p|₁ for unit axes), of the centre
+        // reconstruction and of the containment test's own projection: a few ulp of the largest
+        // point magnitude, generously.
+        let mag = points
+            .iter()
+            .map(|p| p.abs().element_sum())
+            .fold(0.0f64, f64::max)
+            .max(lo.abs().max(hi.abs()).max_element());
+        let slack = mag * (32.0 * f64::EPSILON);
         Self {
             center: axes * mid,
             axes,
@@ -243,7 +254,8 @@ impl Obb {
         }
     }
 
-    /// The axis-aligned box of this OBB.
+    /// The axis-aligned box of this OBB, grown by a few ulp so rounding cannot make it smaller
+    /// than the exact one.
     pub fn aabb(&self) -> Aabb {
         let abs = DMat3::from_cols(
             self.axes.x_axis.abs(),
@@ -251,7 +263,8 @@ impl Obb {
             self.axes.z_axis.abs(),
         );
         let e = abs * self.half_extents;
-        Aabb::new(self.center - e, self.center + e)
+        let slack = (self.center.abs() + e) * (8.0 * f64::EPSILON);
+        Aabb::new(self.center - e - slack, self.center + e + slack)
     }
 
     /// True when `p` lies in the closed box (rounded arithmetic).

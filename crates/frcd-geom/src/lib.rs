@@ -6,8 +6,14 @@
 //! - [`Pose`]: a rigid transform, with composition, inverse and the relative pose of two bodies;
 //! - [`TriMesh`]: a validated indexed triangle mesh, welded by position, with a [`MeshReport`]
 //!   (degenerate and duplicate triangles) and a [`Topology`] report (closed, manifold, oriented);
-//! - bounding volumes [`Aabb`], [`Sphere`], [`Obb`] with OBB fitting ([`fit`]);
-//! - [`shapes`]: procedural closed meshes with outward normals for tests, benches and demos.
+//! - bounding volumes [`Aabb`], [`Sphere`], [`Obb`] with OBB fitting ([`fit`]: vertex
+//!   covariance, area-weighted triangles, convex hull surface);
+//! - [`hull`]: an exact-predicate 3D convex hull (Quickhull) with explicit flat results;
+//! - [`predicates`]: exact orientation predicates (`orient3d`, `orient2d`, `collinear3`);
+//! - [`shapes`]: procedural closed meshes with outward normals for tests, benches and demos
+//!   (box, spheres, cylinder, torus, torus knot, spur gear, coil spring, railway wheel,
+//!   wheelset and rail), the generic [`shapes::revolve`] and [`shapes::sweep`] builders,
+//!   [`shapes::subdivide`] and [`shapes::merge`].
 //!
 //! ```
 //! use frcd_geom::{shapes, Pose, DVec3, DQuat};

@@ -185,7 +185,20 @@ impl TriMesh {
     /// let m = TriMesh::from_triangle_soup(&[[a, b, c], [a, c, d]]).unwrap();
     /// assert_eq!(m.vertex_count(), 4);
     /// ```
+    ///
+    /// A non-finite coordinate is reported as [`MeshError::NonFiniteVertex`] with
+    /// `vertex = 3 · triangle + corner`, the position in the soup.
     pub fn from_triangle_soup(triangles: &[[DVec3; 3]]) -> Result<Self, MeshError> {
+        for (t, tri) in triangles.iter().enumerate() {
+            for (k, p) in tri.iter().enumerate() {
+                if !p.is_finite() {
+                    return Err(MeshError::NonFiniteVertex {
+                        vertex: 3 * t + k,
+                        value: p.to_array(),
+                    });
+                }
+            }
+        }
         let mut map: HashMap<[u64; 3], u32> = HashMap::with_capacity(triangles.len());
         let mut vertices = Vec::new();
         let mut indices = Vec::with_capacity(triangles.len());
@@ -204,7 +217,8 @@ impl TriMesh {
     }
 
     /// A copy with vertices closer than `tolerance` (Euclidean, transitively) merged into one, and
-    /// unreferenced vertices dropped. `tolerance = 0` merges bit-identical positions only.
+    /// unreferenced vertices dropped. `tolerance = 0` (or negative, or NaN) merges bit-identical
+    /// positions only. A merged cluster takes the position of its lowest-index vertex.
     /// Triangles are kept (a triangle may become degenerate; the report says so).
     pub fn welded(&self, tolerance: f64) -> Self {
         let n = self.vertices.len();
@@ -217,8 +231,20 @@ impl TriMesh {
             i
         }
         if tolerance > 0.0 {
-            let cell = tolerance;
-            let key = |p: DVec3| ((p / cell).floor()).as_i64vec3().to_array();
+            // Grid cells at least `tolerance` wide, and wide enough that cell coordinates stay
+            // below 2^30 (so the division's rounding is far below one cell); the 2^-20 margin
+            // keeps two points within `tolerance` in the same or adjacent cells despite that
+            // rounding.
+            let max_abs = self
+                .vertices
+                .iter()
+                .fold(0.0f64, |m, p| m.max(p.abs().max_element()));
+            let cell = tolerance.max(max_abs * (-30f64).exp2()) * (1.0 + (-20f64).exp2());
+            let key = |p: DVec3| {
+                let k = (p / cell).floor();
+                // |k| <= 2^30 unless the tolerance is infinite (then every vertex is in cell 0).
+                [k.x, k.y, k.z].map(|x| if x.is_finite() { x as i64 } else { 0 })
+            };
             let mut grid: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
             for (i, p) in self.vertices.iter().enumerate() {
                 grid.entry(key(*p)).or_default().push(i as u32);
@@ -342,13 +368,24 @@ impl TriMesh {
     }
 
     /// A copy with every vertex mapped by `pose`.
+    ///
+    /// # Panics
+    /// When a mapped vertex is not finite (a non-finite pose, or coordinates overflowing near
+    /// `f64::MAX`); use [`TriMesh::try_transformed`] for untrusted poses.
     pub fn transformed(&self, pose: &crate::Pose) -> Self {
-        let v = self
+        self.try_transformed(pose)
+            .expect("a finite rigid map keeps a valid mesh valid")
+    }
+
+    /// A copy with every vertex mapped by `pose`, or [`MeshError::NonFiniteVertex`] naming the
+    /// first vertex whose image is not finite.
+    pub fn try_transformed(&self, pose: &crate::Pose) -> Result<Self, MeshError> {
+        let v: Vec<DVec3> = self
             .vertices
             .iter()
             .map(|p| pose.transform_point(*p))
             .collect();
-        Self::new(v, self.indices.clone()).expect("a rigid map keeps a valid mesh valid")
+        Self::new(v, self.indices.clone())
     }
 }
 

@@ -1,1 +1,45 @@
-//! frcd-io (work in progress).
+//! # frcd-io
+//!
+//! Files in and out of frcd:
+//!
+//! - **meshes** from STL (ASCII and binary, through `stl_io`) and Wavefront OBJ (through `tobj`),
+//!   welded by position and validated by [`frcd_geom::TriMesh`]; see [`load_mesh`],
+//!   [`load_obj_objects`], and the writers [`write_stl_binary`] and [`write_obj`];
+//! - **scenes**: a JSON file naming bodies, their meshes, static flags, excluded pairs and a
+//!   trajectory of poses, optionally extended by a CSV trajectory from a dynamics simulation
+//!   (`frame,body,x,y,z,qx,qy,qz,qw`); see [`Scene::load`] and [`SceneFile`];
+//! - **reports** of interference checks as JSON and CSV; see [`Report`].
+//!
+//! Every error is an [`Error`] that names the file and, where one exists, the line or the
+//! binary record at fault.
+//!
+//! ```no_run
+//! let scene = frcd_io::Scene::load("testdata/bogie/scene.json")?;
+//! for (i, frame) in scene.frames().iter().enumerate().take(3) {
+//!     println!("frame {i}: {} bodies moved", frame.moved.len());
+//! }
+//! # Ok::<(), frcd_io::Error>(())
+//! ```
+#![warn(missing_docs)]
+
+mod error;
+mod mesh;
+mod report;
+mod scene;
+mod trajectory;
+mod write;
+
+pub use error::{Error, Location};
+pub use mesh::{
+    LoadOptions, MeshFormat, ObjObject, load_mesh, load_mesh_with, load_obj_objects, parse_obj,
+    parse_obj_objects, parse_stl,
+};
+pub use report::{FrameReport, Interference, PairSummary, Report};
+pub use scene::{
+    Body, BodySpec, Frame, FramePoses, PoseSpec, Scene, SceneFile, UNIT_QUATERNION_TOLERANCE,
+};
+pub use trajectory::{TRAJECTORY_HEADER, Trajectory, TrajectoryRow};
+pub use write::{write_obj, write_stl_binary};
+
+/// Shorthand for results of this crate.
+pub type Result<T, E = Error> = std::result::Result<T, E>;

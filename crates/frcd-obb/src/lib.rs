@@ -1,8 +1,36 @@
 //! # frcd-obb
 //!
 //! FRCD: OBB trees on the CPU with exact triangle tests.
+//!
+//! - [`ObbTree::build`]: Gottschalk's OBBTree over a [`frcd_geom::TriMesh`] (fit rule
+//!   selectable, mean-of-centroids split, configurable leaf size, flat depth-first nodes);
+//! - [`collide`]: first contact or every touching triangle pair of two posed trees, tested in
+//!   A's frame with a conservative 15-axis SAT (rounding can only keep a box pair), a hybrid
+//!   top volume (sphere, AABB, root OBB), optional intersection segments and solid-mode
+//!   containment;
+//! - [`collide_cached`] with a caller-owned [`PairCache`]: witness pair, root separating axis,
+//!   generalized front tracking; same answers as [`collide`];
+//! - [`World`]: many bodies sharing `Arc<ObbTree>`s, incremental sweep-and-prune and a
+//!   deterministic (rayon-parallel with the default `parallel` feature) narrow phase;
+//! - [`oracle`]: the brute-force exact oracle every backend is compared with.
+//!
+//! With [`frcd_tritri::Method::Exact`] (the default) the pairs reported are exactly the
+//! oracle's: the box tests are conservative and both map B's triangles into A's frame with the
+//! same f64 operations ([`RelativeFrame`]).
 #![warn(missing_docs)]
 
+pub mod oracle;
+mod query;
+mod sat;
+mod solid;
 mod tree;
+mod world;
 
-pub use tree::{Node, ObbTree};
+pub use frcd_geom::fit::FitMethod;
+pub use frcd_tritri::{Contact, Method};
+pub use query::{
+    Collision, Containment, Counters, Mode, PairCache, RelativeFrame, Request, TopVolume, collide,
+    collide_cached,
+};
+pub use tree::{BuildOptions, Node, ObbTree};
+pub use world::{BodyContact, BodyId, StepReport, World, WorldError, WorldOptions};

@@ -1,4 +1,5 @@
-use frcd_geom::{Aabb, Obb, Sphere, Triangle};
+use frcd_geom::fit::{FitMethod, fit_obb};
+use frcd_geom::{Aabb, DVec3, Obb, Sphere, TriMesh, Triangle};
 
 /// One node of an [`ObbTree`], in a flat array in depth-first order.
 ///
@@ -25,7 +26,38 @@ impl Node {
     }
 }
 
+static NEXT_UID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+
+/// How to build an [`ObbTree`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct BuildOptions {
+    /// Rule choosing each node's box axes. The default is the rule that gave the fastest queries
+    /// in `benches/benches/obb.rs` (see the crate README).
+    pub fit: FitMethod,
+    /// Most triangles in a leaf (a node with at most this many triangles becomes a leaf).
+    /// `0` is treated as `1`.
+    pub max_leaf_triangles: u32,
+}
+
+impl Default for BuildOptions {
+    fn default() -> Self {
+        Self {
+            fit: FitMethod::VertexCovariance,
+            max_leaf_triangles: 1,
+        }
+    }
+}
+
 /// An OBB tree over one mesh, in the mesh's local frame.
+///
+/// ```
+/// use frcd_obb::{BuildOptions, ObbTree};
+/// let mesh = frcd_geom::shapes::icosphere(1.0, 2);
+/// let tree = ObbTree::build(&mesh, &BuildOptions::default());
+/// assert_eq!(tree.nodes().len(), 2 * mesh.triangle_count() - 1);
+/// assert_eq!(tree.triangles().len(), mesh.triangle_count());
+/// ```
 #[derive(Clone, Debug)]
 pub struct ObbTree {
     pub(crate) nodes: Vec<Node>,
@@ -33,9 +65,88 @@ pub struct ObbTree {
     pub(crate) triangles: Vec<Triangle>,
     pub(crate) sphere: Sphere,
     pub(crate) aabb: Aabb,
+    /// Largest |coordinate| norm of the mesh (local frame), for error bounds.
+    pub(crate) radius_from_origin: f64,
+    /// One vertex per connected component (for the point-in-mesh parity tests).
+    pub(crate) component_points: Vec<DVec3>,
+    /// Identity of this build (clones share it: same structure), for caches.
+    pub(crate) uid: u64,
+    /// The mesh's vertex indices per triangle (for the neighbourhood of a witness).
+    pub(crate) indices: Vec<[u32; 3]>,
+    /// Triangles sharing a vertex with each triangle (CSR: offsets, then ids), built on first
+    /// use by the coherence cache.
+    pub(crate) neighbours: std::sync::OnceLock<(Vec<u32>, Vec<u32>)>,
+    /// Every edge has an even number of incident triangles (parity tests are meaningful).
+    pub(crate) closed: bool,
 }
 
 impl ObbTree {
+    /// Builds the tree: each node's box is fitted with `options.fit`; a node is split by the
+    /// plane through the mean of its triangles' centroids, across its box's major axis (the
+    /// other two axes are tried when one side would be empty, and the list is halved when all
+    /// three fail); nodes with at most `options.max_leaf_triangles` triangles become leaves.
+    /// `O(n log n)` for balanced splits; an explicit stack keeps degenerate inputs off the call
+    /// stack.
+    pub fn build(mesh: &TriMesh, options: &BuildOptions) -> ObbTree {
+        let triangles: Vec<Triangle> = mesh.triangles().collect();
+        let n = triangles.len();
+        let leaf = options.max_leaf_triangles.max(1) as usize;
+        let mut order: Vec<u32> = (0..n as u32).collect();
+        // Triangles permuted alongside `order`, so a node's triangles are one contiguous slice.
+        let mut perm: Vec<Triangle> = triangles.clone();
+        let mut centroids: Vec<DVec3> = triangles.iter().map(|t| t.centroid()).collect();
+        let mut nodes: Vec<Node> = Vec::with_capacity(2 * n.div_ceil(leaf));
+        // (lo, hi, parent whose `right` this node is, or u32::MAX)
+        let mut stack: Vec<(usize, usize, u32)> = vec![(0, n, u32::MAX)];
+        while let Some((lo, hi, parent)) = stack.pop() {
+            let index = nodes.len() as u32;
+            if parent != u32::MAX {
+                nodes[parent as usize].right = index;
+            }
+            let obb = fit_obb(&perm[lo..hi], options.fit);
+            if hi - lo <= leaf {
+                nodes.push(Node {
+                    obb,
+                    right: 0,
+                    first: lo as u32,
+                    count: (hi - lo) as u32,
+                });
+                continue;
+            }
+            let mid = split(
+                &obb,
+                &mut order[lo..hi],
+                &mut perm[lo..hi],
+                &mut centroids[lo..hi],
+            ) + lo;
+            nodes.push(Node {
+                obb,
+                right: 0,
+                first: 0,
+                count: 0,
+            });
+            stack.push((mid, hi, index));
+            stack.push((lo, mid, u32::MAX));
+        }
+        let points = mesh.vertices();
+        let sphere = Sphere::from_points(points);
+        let aabb = mesh.aabb();
+        let radius_from_origin = aabb.min.abs().max(aabb.max.abs()).length();
+        ObbTree {
+            nodes,
+            order,
+            triangles,
+            sphere,
+            aabb,
+            radius_from_origin,
+            component_points: component_points(mesh),
+            closed: mesh.topology().is_closed(),
+            uid: NEXT_UID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
+            indices: mesh.indices().to_vec(),
+            neighbours: std::sync::OnceLock::new(),
+        }
+    }
+
     /// The nodes, depth-first; node 0 is the root.
     pub fn nodes(&self) -> &[Node] {
         &self.nodes
@@ -56,4 +167,148 @@ impl ObbTree {
     pub fn aabb(&self) -> Aabb {
         self.aabb
     }
+    /// True when every edge of the mesh has exactly two incident triangles, so the mesh bounds a
+    /// solid and solid-mode queries can test containment in it.
+    pub fn is_closed(&self) -> bool {
+        self.closed
+    }
+    /// One vertex of each connected component of the mesh (local frame): the points whose
+    /// parity is tested in solid mode.
+    pub fn component_points(&self) -> &[DVec3] {
+        &self.component_points
+    }
+    /// Triangles sharing a vertex with triangle `t` (itself included).
+    pub(crate) fn neighbours(&self, t: u32) -> &[u32] {
+        let (offsets, ids) = self.neighbours.get_or_init(|| {
+            let nv = self
+                .indices
+                .iter()
+                .flatten()
+                .copied()
+                .max()
+                .map_or(0, |m| m as usize + 1);
+            // vertex -> triangles
+            let mut vcount = vec![0u32; nv + 1];
+            for tri in &self.indices {
+                for &v in tri {
+                    vcount[v as usize + 1] += 1;
+                }
+            }
+            for i in 0..nv {
+                vcount[i + 1] += vcount[i];
+            }
+            let mut fill = vcount.clone();
+            let mut vtris = vec![0u32; vcount[nv] as usize];
+            for (t, tri) in self.indices.iter().enumerate() {
+                for &v in tri {
+                    vtris[fill[v as usize] as usize] = t as u32;
+                    fill[v as usize] += 1;
+                }
+            }
+            let mut offsets = Vec::with_capacity(self.indices.len() + 1);
+            let mut ids = Vec::new();
+            offsets.push(0u32);
+            for tri in &self.indices {
+                let start = ids.len();
+                for &v in tri {
+                    let (lo, hi) = (vcount[v as usize] as usize, vcount[v as usize + 1] as usize);
+                    ids.extend_from_slice(&vtris[lo..hi]);
+                }
+                ids[start..].sort_unstable();
+                let mut w = start;
+                for r in start..ids.len() {
+                    if r == start || ids[r] != ids[w - 1] {
+                        ids[w] = ids[r];
+                        w += 1;
+                    }
+                }
+                ids.truncate(w);
+                offsets.push(ids.len() as u32);
+            }
+            (offsets, ids)
+        });
+        &ids[offsets[t as usize] as usize..offsets[t as usize + 1] as usize]
+    }
+
+    /// Depth of the tree (a single leaf has depth 1).
+    pub fn depth(&self) -> usize {
+        let mut best = 0;
+        let mut stack = vec![(0u32, 1usize)];
+        while let Some((i, d)) = stack.pop() {
+            best = best.max(d);
+            let node = &self.nodes[i as usize];
+            if !node.is_leaf() {
+                stack.push((i + 1, d + 1));
+                stack.push((node.right, d + 1));
+            }
+        }
+        best
+    }
+}
+
+/// Partitions a node's triangles; returns the size of the left part (in `1..len`).
+fn split(obb: &Obb, order: &mut [u32], perm: &mut [Triangle], centroids: &mut [DVec3]) -> usize {
+    let len = order.len();
+    let mean = centroids.iter().copied().sum::<DVec3>() / len as f64;
+    let axes = [obb.axes.x_axis, obb.axes.y_axis, obb.axes.z_axis];
+    for axis in axes {
+        let cut = axis.dot(mean);
+        // Hoare-style partition of the three parallel arrays: `< cut` left.
+        let mut i = 0;
+        let mut j = len;
+        while i < j {
+            if axis.dot(centroids[i]) < cut {
+                i += 1;
+            } else {
+                j -= 1;
+                order.swap(i, j);
+                perm.swap(i, j);
+                centroids.swap(i, j);
+            }
+        }
+        if i > 0 && i < len {
+            return i;
+        }
+    }
+    // All centroids project to the same point on every axis: halve the list.
+    len / 2
+}
+
+/// One vertex per connected component (triangles connected through shared vertex indices).
+fn component_points(mesh: &TriMesh) -> Vec<DVec3> {
+    let n = mesh.vertex_count();
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    fn find(p: &mut [u32], mut i: u32) -> u32 {
+        while p[i as usize] != i {
+            p[i as usize] = p[p[i as usize] as usize];
+            i = p[i as usize];
+        }
+        i
+    }
+    let mut used = vec![false; n];
+    for tri in mesh.indices() {
+        for &v in tri {
+            used[v as usize] = true;
+        }
+        let r0 = find(&mut parent, tri[0]);
+        for &v in &tri[1..] {
+            let r = find(&mut parent, v);
+            if r != r0 {
+                parent[r as usize] = r0;
+            }
+        }
+    }
+    let mut seen = vec![false; n];
+    let mut out = Vec::new();
+    for v in 0..n as u32 {
+        if !used[v as usize] {
+            continue;
+        }
+        let r = find(&mut parent, v);
+        if !seen[r as usize] {
+            seen[r as usize] = true;
+            out.push(mesh.vertices()[v as usize]);
+        }
+    }
+    out
 }

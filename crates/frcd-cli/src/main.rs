@@ -1,0 +1,198 @@
+//! `frcd`: interference checking of an assembly along a trajectory.
+//!
+//! - `frcd check SCENE [--backend cpu|gpgpu|image|hybrid] [--mode exact|fast] [--json OUT]
+//!   [--csv OUT] [--segments]`: per frame the interfering body pairs, their touching triangle
+//!   pairs, the time per frame; a summary of when each pair interferes.
+//! - `frcd render SCENE --frame N -o out.png`: an offscreen picture with the interfering
+//!   triangles highlighted (feature `gpu`).
+//! - `frcd bench SCENE`: time per frame of every backend and mode.
+//! - `frcd calibrate [-o FILE]`: measures the scheduler's cost model on this machine.
+
+mod commands;
+#[cfg(feature = "gpu")]
+mod render;
+
+use clap::{Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Exact real-time collision detection between triangle meshes: interference checks of CAD
+/// assemblies along dynamics trajectories.
+#[derive(Parser, Debug)]
+#[command(name = "frcd", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+/// Backend choice on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BackendArg {
+    /// CPU only: sweep and prune, OBB trees, exact triangle tests.
+    Cpu,
+    /// GPU box pass and GPU pair traversal.
+    Gpgpu,
+    /// Image-space accurate colliding set (fast mode).
+    Image,
+    /// Per stage by the cost model.
+    Hybrid,
+}
+
+/// Mode on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ModeArg {
+    /// Equal to the exact oracle.
+    Exact,
+    /// Image-space pipeline, resolution-bounded.
+    Fast,
+}
+
+/// Options shared by the commands that run the checker.
+#[derive(clap::Args, Debug, Clone)]
+pub struct CheckerArgs {
+    /// Backend.
+    #[arg(long, value_enum, default_value = "hybrid")]
+    pub backend: BackendArg,
+    /// Mode.
+    #[arg(long, value_enum, default_value = "exact")]
+    pub mode: ModeArg,
+    /// Cost model JSON (from `frcd calibrate`); default: $FRCD_COST_MODEL, else
+    /// ./frcd-cost.json when present, else built-in figures.
+    #[arg(long)]
+    pub cost: Option<PathBuf>,
+    /// Image-space resolution (pixels across a pair's overlap region).
+    #[arg(long, default_value_t = 256)]
+    pub resolution: u32,
+    /// Extra trajectory CSV (`frame,body,x,y,z,qx,qy,qz,qw`) merged into the scene's frames.
+    #[arg(long)]
+    pub trajectory: Option<PathBuf>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Check every frame of a scene for interference.
+    Check {
+        /// Scene JSON file.
+        scene: PathBuf,
+        #[command(flatten)]
+        checker: CheckerArgs,
+        /// Write the JSON report here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Write the CSV report here.
+        #[arg(long)]
+        csv: Option<PathBuf>,
+        /// Include contact segments (world coordinates) in the JSON report.
+        #[arg(long)]
+        segments: bool,
+        /// First frame to check.
+        #[arg(long, default_value_t = 0)]
+        first: usize,
+        /// Number of frames to check (default: all from --first).
+        #[arg(long)]
+        count: Option<usize>,
+        /// No progress and no per-pair summary on the terminal.
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// Render one frame with the interfering triangles highlighted.
+    Render {
+        /// Scene JSON file.
+        scene: PathBuf,
+        /// Frame index.
+        #[arg(long, default_value_t = 0)]
+        frame: usize,
+        /// Output PNG.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Image width in pixels.
+        #[arg(long, default_value_t = 1280)]
+        width: u32,
+        /// Image height in pixels.
+        #[arg(long, default_value_t = 800)]
+        height: u32,
+        /// Frame the whole scene (default: the moving bodies).
+        #[arg(long)]
+        all: bool,
+        #[command(flatten)]
+        checker: CheckerArgs,
+    },
+    /// Time per frame of every backend and mode on a scene.
+    Bench {
+        /// Scene JSON file.
+        scene: PathBuf,
+        /// Frames timed per backend (from frame 0).
+        #[arg(long, default_value_t = 500)]
+        frames: usize,
+        /// Cost model JSON for the hybrid rows.
+        #[arg(long)]
+        cost: Option<PathBuf>,
+        /// Write the table as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
+    /// Measure the cost model on this machine and store it as JSON.
+    Calibrate {
+        /// Output file.
+        #[arg(short, long, default_value = "frcd-cost.json")]
+        output: PathBuf,
+        /// Timed repetitions per figure.
+        #[arg(long, default_value_t = 5)]
+        repetitions: usize,
+        /// CPU figures only.
+        #[arg(long)]
+        cpu_only: bool,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Check {
+            scene,
+            checker,
+            json,
+            csv,
+            segments,
+            first,
+            count,
+            quiet,
+        } => commands::check(&commands::CheckRun {
+            scene,
+            checker,
+            json,
+            csv,
+            segments,
+            first,
+            count,
+            quiet,
+        }),
+        Command::Render {
+            scene,
+            frame,
+            output,
+            width,
+            height,
+            all,
+            checker,
+        } => commands::render(&scene, frame, &output, width, height, all, &checker),
+        Command::Bench {
+            scene,
+            frames,
+            cost,
+            json,
+        } => commands::bench(&scene, frames, cost.as_deref(), json.as_deref()),
+        Command::Calibrate {
+            output,
+            repetitions,
+            cpu_only,
+        } => commands::calibrate(&output, repetitions, cpu_only),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

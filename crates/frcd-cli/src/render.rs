@@ -1,0 +1,334 @@
+//! `frcd render`: an offscreen wgpu picture of one frame, flat shaded, interfering triangles in
+//! red, bodies contained in another in orange; written as PNG.
+
+use anyhow::{Context, Result, anyhow, bail};
+use frcd_geom::{Aabb, DVec3, Pose};
+use frcd_io::Scene;
+use glam::{DMat4, Mat4};
+use std::path::Path;
+
+/// What to highlight on one body.
+pub struct Marks {
+    /// Per triangle: part of a touching pair.
+    pub triangles: Vec<bool>,
+    /// The body lies inside another (or holds one), without surface contact.
+    pub contained: bool,
+}
+
+const SHADER: &str = r#"
+struct U { m: mat4x4<f32> };
+@group(0) @binding(0) var<uniform> u: U;
+struct V { @builtin(position) pos: vec4<f32>, @location(0) color: vec3<f32> };
+@vertex fn vs(@location(0) p: vec3<f32>, @location(1) c: vec3<f32>) -> V {
+    var o: V;
+    o.pos = u.m * vec4<f32>(p, 1.0);
+    o.color = c;
+    return o;
+}
+@fragment fn fs(v: V) -> @location(0) vec4<f32> { return vec4<f32>(v.color, 1.0); }
+"#;
+
+const PALETTE: [[f32; 3]; 8] = [
+    [0.55, 0.62, 0.72],
+    [0.62, 0.66, 0.55],
+    [0.70, 0.62, 0.50],
+    [0.58, 0.55, 0.70],
+    [0.50, 0.68, 0.66],
+    [0.70, 0.58, 0.62],
+    [0.64, 0.64, 0.64],
+    [0.52, 0.60, 0.52],
+];
+
+/// Renders `poses` of `scene` to `output` (PNG, `width` x `height`).
+pub fn render_png(
+    scene: &Scene,
+    poses: &[Pose],
+    marks: &[Marks],
+    width: u32,
+    height: u32,
+    frame_all: bool,
+    output: &Path,
+) -> Result<()> {
+    let bodies = scene.bodies();
+    // Framing: the moving bodies (a long track would make the assembly a dot), or everything.
+    let mut focus = Aabb::EMPTY;
+    let mut everything = Aabb::EMPTY;
+    for (b, p) in bodies.iter().zip(poses) {
+        let bx = b.mesh.aabb().transformed(p);
+        everything = everything.union(&bx);
+        if frame_all || !b.is_static {
+            focus = focus.union(&bx);
+        }
+    }
+    if focus.is_empty() {
+        focus = everything;
+    }
+    if focus.is_empty() {
+        bail!("the scene has no geometry to render");
+    }
+    let center = focus.center();
+    let radius = focus.half_extents().length().max(1e-9);
+    // Vertices relative to the focus centre, in f32, shading baked per face.
+    let light = DVec3::new(0.4, -0.5, 0.75).normalize();
+    let mut verts: Vec<f32> = Vec::new();
+    let mut hot: Vec<f32> = Vec::new();
+    for (i, ((b, p), m)) in bodies.iter().zip(poses).zip(marks).enumerate() {
+        let base = if b.is_static {
+            [0.45, 0.45, 0.47]
+        } else if m.contained {
+            [0.95, 0.55, 0.15]
+        } else {
+            PALETTE[i % PALETTE.len()]
+        };
+        for (t, tri) in b.mesh.triangles().enumerate() {
+            let w: Vec<DVec3> = tri.v.iter().map(|&v| p.transform_point(v) - center).collect();
+            let n = (w[1] - w[0]).cross(w[2] - w[0]).normalize_or_zero();
+            let shade = (0.3 + 0.7 * n.dot(light).abs()) as f32;
+            let is_hot = m.triangles.get(t).copied().unwrap_or(false);
+            let color = if is_hot { [1.0, 0.08, 0.05] } else { base };
+            let dst = if is_hot { &mut hot } else { &mut verts };
+            for v in &w {
+                dst.extend_from_slice(&[v.x as f32, v.y as f32, v.z as f32]);
+                dst.extend_from_slice(&[color[0] * shade, color[1] * shade, color[2] * shade]);
+            }
+        }
+    }
+    // Interfering triangles are drawn last, on top of coplanar neighbours (depth test LessEqual).
+    verts.extend_from_slice(&hot);
+    let vertex_count = (verts.len() / 6) as u32;
+    // Camera: three-quarter view from front-right and above, perspective framing the focus box.
+    let aspect = width as f64 / height as f64;
+    let fov_y = 30f64.to_radians();
+    let half = (fov_y / 2.0).tan().min((fov_y / 2.0).tan() * aspect);
+    let dist = radius / half.atan().sin() * 1.05;
+    let dir = DVec3::new(0.9, -1.3, 0.8).normalize();
+    let eye = dir * dist;
+    let view = DMat4::look_at_rh(eye, DVec3::ZERO, DVec3::Z);
+    let near = (dist - 2.0 * radius).max(dist * 0.02);
+    let far = dist + (everything.half_extents().length() + (everything.center() - center).length()) * 2.0 + radius;
+    let proj = DMat4::perspective_rh(fov_y, aspect, near, far);
+    let m: Mat4 = (proj * view).as_mat4();
+    let pixels = draw(&verts, vertex_count, m, width, height)?;
+    let file = std::fs::File::create(output).with_context(|| format!("cannot create {}", output.display()))?;
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), width, height);
+    enc.set_color(png::ColorType::Rgba);
+    enc.set_depth(png::BitDepth::Eight);
+    let mut w = enc.write_header().with_context(|| format!("cannot write {}", output.display()))?;
+    w.write_image_data(&pixels)
+        .with_context(|| format!("cannot write {}", output.display()))?;
+    Ok(())
+}
+
+fn draw(verts: &[f32], count: u32, m: Mat4, width: u32, height: u32) -> Result<Vec<u8>> {
+    use wgpu::util::DeviceExt;
+    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
+    let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
+        .map_err(|e| anyhow!("no GPU adapter for rendering: {e}"))?;
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("frcd render"),
+        ..Default::default()
+    }))
+    .map_err(|e| anyhow!("cannot create a GPU device for rendering: {e}"))?;
+    let max = device.limits().max_texture_dimension_2d;
+    if width > max || height > max {
+        bail!("image size {width}x{height} exceeds the device's texture limit {max}");
+    }
+    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("frcd render"),
+        source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+    });
+    let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("frcd render matrix"),
+        contents: bytemuck::cast_slice(&m.to_cols_array()),
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    // An empty scene still needs a non-empty buffer.
+    let data: &[f32] = if verts.is_empty() { &[0.0; 6] } else { verts };
+    let vbuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("frcd render vertices"),
+        contents: bytemuck::cast_slice(data),
+        usage: wgpu::BufferUsages::VERTEX,
+    });
+    let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: None,
+        entries: &[wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility: wgpu::ShaderStages::VERTEX,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        }],
+    });
+    let bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: None,
+        layout: &bgl,
+        entries: &[wgpu::BindGroupEntry {
+            binding: 0,
+            resource: uniform.as_entire_binding(),
+        }],
+    });
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: None,
+        bind_group_layouts: &[Some(&bgl)],
+        immediate_size: 0,
+    });
+    let color_format = wgpu::TextureFormat::Rgba8Unorm;
+    let depth_format = wgpu::TextureFormat::Depth32Float;
+    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("frcd render"),
+        layout: Some(&layout),
+        vertex: wgpu::VertexState {
+            module: &shader,
+            entry_point: Some("vs"),
+            compilation_options: Default::default(),
+            buffers: &[Some(wgpu::VertexBufferLayout {
+                array_stride: 24,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3],
+            })],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: depth_format,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::LessEqual),
+            stencil: wgpu::StencilState::default(),
+            bias: wgpu::DepthBiasState::default(),
+        }),
+        multisample: wgpu::MultisampleState::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &shader,
+            entry_point: Some("fs"),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format: color_format,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    });
+    let size = wgpu::Extent3d {
+        width,
+        height,
+        depth_or_array_layers: 1,
+    };
+    let target = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("frcd render color"),
+        size,
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: color_format,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    });
+    let depth = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("frcd render depth"),
+        size,
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: depth_format,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+        view_formats: &[],
+    });
+    let target_view = target.create_view(&Default::default());
+    let depth_view = depth.create_view(&Default::default());
+    let row = (width * 4).div_ceil(256) * 256;
+    let readback = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("frcd render readback"),
+        size: row as u64 * height as u64,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut enc = device.create_command_encoder(&Default::default());
+    {
+        let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("frcd render"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &target_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color {
+                        r: 0.93,
+                        g: 0.94,
+                        b: 0.96,
+                        a: 1.0,
+                    }),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &depth_view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        if count > 0 {
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &bg, &[]);
+            pass.set_vertex_buffer(0, vbuf.slice(..));
+            pass.draw(0..count, 0..1);
+        }
+    }
+    enc.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo {
+            texture: &target,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &readback,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(row),
+                rows_per_image: Some(height),
+            },
+        },
+        size,
+    );
+    queue.submit([enc.finish()]);
+    if let Some(e) = pollster::block_on(scope.pop()) {
+        bail!("GPU rendering failed: {e}");
+    }
+    let slice = readback.slice(..);
+    let (tx, rx) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| anyhow!("GPU poll failed: {e}"))?;
+    rx.recv()
+        .map_err(|e| anyhow!("GPU readback failed: {e}"))?
+        .map_err(|e| anyhow!("GPU readback failed: {e}"))?;
+    let mapped = slice
+        .get_mapped_range()
+        .map_err(|e| anyhow!("GPU readback failed: {e}"))?;
+    let mut pixels = Vec::with_capacity((width * height * 4) as usize);
+    for y in 0..height as usize {
+        let start = y * row as usize;
+        pixels.extend_from_slice(&mapped[start..start + width as usize * 4]);
+    }
+    drop(mapped);
+    readback.unmap();
+    Ok(pixels)
+}

@@ -1,0 +1,259 @@
+use crate::context::BOX_TILE;
+use crate::pack::{round_down, round_up};
+use crate::{GpuContext, GpuError};
+use frcd_geom::Aabb;
+
+const UNCERTAIN_FLAG: u32 = 0x8000_0000;
+const MAX_RERUNS: u32 = 32;
+
+/// The answer of [`GpuContext::overlapping_bodies`].
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct BodyPairs {
+    /// Every pair `(i, j)`, `i < j`, of boxes that share a point (closed boxes, f64), sorted.
+    pub pairs: Vec<(u32, u32)>,
+    /// Pairs the f32 comparison could not decide, re-checked in f64 on the CPU.
+    pub uncertain: usize,
+    /// Submissions made (1 unless the output overflowed).
+    pub submissions: u32,
+    /// Readbacks made (1 unless the output overflowed).
+    pub readbacks: u32,
+}
+
+struct BoxBuffers {
+    ctx_id: u64,
+    body_cap: u32,
+    output_cap: u32,
+    boxes: wgpu::Buffer,
+    out: wgpu::Buffer,
+    count: wgpu::Buffer,
+    params: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    bind: wgpu::BindGroup,
+}
+
+/// Caller-owned buffers of [`GpuContext::overlapping_bodies`], grown as needed.
+pub struct BoxScratch {
+    output_cap: u32,
+    bufs: Option<BoxBuffers>,
+}
+
+impl Default for BoxScratch {
+    fn default() -> Self {
+        Self::with_capacity(1 << 12)
+    }
+}
+
+impl std::fmt::Debug for BoxScratch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BoxScratch")
+            .field("output_capacity", &self.output_cap)
+            .finish()
+    }
+}
+
+impl BoxScratch {
+    /// Scratch whose first output buffer holds `output` pairs (at least 1); overflow re-runs.
+    pub fn with_capacity(output: u32) -> Self {
+        Self {
+            output_cap: output.max(1),
+            bufs: None,
+        }
+    }
+
+    /// Current output capacity in pairs.
+    pub fn capacity(&self) -> u32 {
+        self.output_cap
+    }
+
+    fn ensure(&mut self, ctx: &GpuContext, bodies: u32) -> Result<&BoxBuffers, GpuError> {
+        let reuse = match &self.bufs {
+            Some(b) if b.ctx_id != ctx.id => return Err(GpuError::ForeignObject("BoxScratch")),
+            Some(b) => b.body_cap >= bodies && b.output_cap == self.output_cap,
+            None => false,
+        };
+        if !reuse {
+            let body_cap = bodies.next_power_of_two().max(64);
+            let max = ctx.max_storage_bytes();
+            for (what, bytes) in [
+                ("body boxes", body_cap as u64 * 64),
+                ("body pairs", self.output_cap as u64 * 8),
+            ] {
+                if bytes > max {
+                    return Err(GpuError::CapacityExceeded {
+                        what,
+                        needed: bytes,
+                        limit: max,
+                    });
+                }
+            }
+            use wgpu::BufferUsages as B;
+            let d = &ctx.device;
+            let buf = |label: &str, size: u64, usage: B| {
+                d.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size,
+                    usage,
+                    mapped_at_creation: false,
+                })
+            };
+            let osize = self.output_cap as u64 * 8;
+            let boxes = buf(
+                "frcd-gpgpu body boxes",
+                body_cap as u64 * 64,
+                B::STORAGE | B::COPY_DST,
+            );
+            let out = buf("frcd-gpgpu body pairs", osize, B::STORAGE | B::COPY_SRC);
+            let count = buf(
+                "frcd-gpgpu body pair count",
+                4,
+                B::STORAGE | B::COPY_SRC | B::COPY_DST,
+            );
+            let params = buf("frcd-gpgpu body params", 16, B::UNIFORM | B::COPY_DST);
+            let staging = buf(
+                "frcd-gpgpu body staging",
+                8 + osize,
+                B::MAP_READ | B::COPY_DST,
+            );
+            let bind = d.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("frcd-gpgpu boxes"),
+                layout: &ctx.pipes.boxes_bgl,
+                entries: &[
+                    crate::context::entry(0, &boxes),
+                    crate::context::entry(1, &out),
+                    crate::context::entry(2, &count),
+                    crate::context::entry(3, &params),
+                ],
+            });
+            self.bufs = Some(BoxBuffers {
+                ctx_id: ctx.id,
+                body_cap,
+                output_cap: self.output_cap,
+                boxes,
+                out,
+                count,
+                params,
+                staging,
+                bind,
+            });
+        }
+        Ok(self.bufs.as_ref().expect("just set"))
+    }
+}
+
+/// Four f32 corners per box: outer (rounded outward) and inner (rounded inward), as in
+/// boxes.wgsl.
+fn box_words(b: &Aabb) -> [f32; 16] {
+    let (lo, hi) = (b.min, b.max);
+    [
+        round_down(lo.x),
+        round_down(lo.y),
+        round_down(lo.z),
+        0.0,
+        round_up(hi.x),
+        round_up(hi.y),
+        round_up(hi.z),
+        0.0,
+        round_up(lo.x),
+        round_up(lo.y),
+        round_up(lo.z),
+        0.0,
+        round_down(hi.x),
+        round_down(hi.y),
+        round_down(hi.z),
+        0.0,
+    ]
+}
+
+impl GpuContext {
+    /// Every pair of bodies whose world boxes overlap (closed boxes), computed on the GPU over
+    /// all pairs in f32 with directed rounding; pairs the f32 comparison cannot decide are
+    /// re-checked in f64, so the answer equals the f64 all-pairs test ([`Aabb::intersects`]).
+    /// One submission and one readback (plus one per output overflow). Boxes with NaN are an
+    /// error; empty boxes overlap nothing.
+    pub fn overlapping_bodies(
+        &self,
+        boxes: &[Aabb],
+        scratch: &mut BoxScratch,
+    ) -> Result<BodyPairs, GpuError> {
+        if let Some(i) = boxes.iter().position(|b| b.min.is_nan() || b.max.is_nan()) {
+            return Err(GpuError::InvalidInput(format!(
+                "box {i} has a NaN coordinate"
+            )));
+        }
+        let n = boxes.len();
+        let mut answer = BodyPairs::default();
+        if n < 2 {
+            return Ok(answer);
+        }
+        let groups = (n as u64).div_ceil(BOX_TILE as u64);
+        let max_groups = self.limits.max_compute_workgroups_per_dimension as u64;
+        if groups > max_groups || n as u64 >= UNCERTAIN_FLAG as u64 {
+            return Err(GpuError::CapacityExceeded {
+                what: "bodies (workgroups per dimension)",
+                needed: n as u64,
+                limit: max_groups * BOX_TILE as u64,
+            });
+        }
+        let words: Vec<f32> = boxes.iter().flat_map(box_words).collect();
+        let (count, entries) = loop {
+            let bufs = scratch.ensure(self, n as u32)?;
+            self.queue
+                .write_buffer(&bufs.boxes, 0, bytemuck::cast_slice(&words));
+            self.queue.write_buffer(
+                &bufs.params,
+                0,
+                bytemuck::cast_slice(&[n as u32, bufs.output_cap, 0, 0]),
+            );
+            let mut enc = self
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("frcd-gpgpu boxes"),
+                });
+            enc.clear_buffer(&bufs.count, 0, None);
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("frcd-gpgpu boxes"),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(&self.pipes.boxes);
+                pass.set_bind_group(0, &bufs.bind, &[]);
+                pass.dispatch_workgroups(groups as u32, groups as u32, 1);
+            }
+            let out_bytes = bufs.output_cap as u64 * 8;
+            enc.copy_buffer_to_buffer(&bufs.count, 0, &bufs.staging, 0, 4);
+            enc.copy_buffer_to_buffer(&bufs.out, 0, &bufs.staging, 8, out_bytes);
+            self.submit(enc.finish());
+            answer.submissions += 1;
+            let bytes = self.read_back(&bufs.staging, 8 + out_bytes)?;
+            answer.readbacks += 1;
+            let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
+            let count = words[0];
+            if count > bufs.output_cap {
+                scratch.output_cap = count.max(bufs.output_cap.saturating_mul(2));
+                if answer.submissions > MAX_RERUNS {
+                    return Err(GpuError::Internal("box pass keeps overflowing".into()));
+                }
+                continue;
+            }
+            break (count as usize, words);
+        };
+        let mut pairs = Vec::with_capacity(count);
+        for e in entries[2..2 + 2 * count].chunks_exact(2) {
+            let (i, tag) = (e[0], e[1]);
+            let j = tag & !UNCERTAIN_FLAG;
+            if i as usize >= n || j as usize >= n || i >= j {
+                return Err(GpuError::Internal(format!("body pair ({i}, {j}) invalid")));
+            }
+            if tag & UNCERTAIN_FLAG != 0 {
+                answer.uncertain += 1;
+                if !boxes[i as usize].intersects(&boxes[j as usize]) {
+                    continue;
+                }
+            }
+            pairs.push((i, j));
+        }
+        pairs.sort_unstable();
+        answer.pairs = pairs;
+        Ok(answer)
+    }
+}

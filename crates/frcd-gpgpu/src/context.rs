@@ -1,0 +1,439 @@
+use crate::GpuError;
+use crate::shaders;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+static NEXT_CONTEXT_ID: AtomicU64 = AtomicU64::new(1);
+
+/// Workgroup size of the traversal pass (must match `WG` in the shaders).
+pub(crate) const WG: u32 = 64;
+/// Boxes per tile of the box pass (workgroup size and staged tile, must match boxes.wgsl).
+pub(crate) const BOX_TILE: u32 = 64;
+
+/// The device limits frcd-gpgpu needs (no optional feature is needed:
+/// [`wgpu::Features::empty()`]). Everything else (texture size, buffer sizes, workgroups per
+/// dimension) is read from the device and used as it is; meshes and buffers that do not fit
+/// return a typed error.
+///
+/// Also needed, checked where an adapter is known ([`GpuContext::headless`],
+/// [`GpuContext::from_adapter`]): the downlevel flags `COMPUTE_SHADERS` and `INDIRECT_EXECUTION`.
+pub fn requirements() -> wgpu::Limits {
+    wgpu::Limits {
+        // traverse.wgsl: frontier in/out, state, output; control.wgsl: state, args, frontier.
+        max_storage_buffers_per_shader_stage: 4,
+        // Two trees × (nodes, triangles).
+        max_sampled_textures_per_shader_stage: 4,
+        // Two mesh descriptions, the pose, the capacities.
+        max_uniform_buffers_per_shader_stage: 4,
+        max_bind_groups: 2,
+        max_storage_buffer_binding_size: 1 << 16,
+        max_compute_invocations_per_workgroup: WG,
+        max_compute_workgroup_size_x: WG,
+        max_compute_workgroup_size_y: 1,
+        // boxes.wgsl stages 64 boxes of 64 bytes.
+        max_compute_workgroup_storage_size: BOX_TILE * 64,
+        max_compute_workgroup_size_z: 1,
+        max_compute_workgroups_per_dimension: 1,
+        // One node (5 texels) per row at least.
+        max_texture_dimension_2d: 8,
+        max_texture_array_layers: 1,
+        ..wgpu::Limits::downlevel_webgl2_defaults()
+    }
+}
+
+/// Options of [`GpuContext::headless`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct HeadlessOptions {
+    /// Prefer a discrete GPU (default) or an integrated / low-power one.
+    pub low_power: bool,
+    /// Ask for the fallback (software) adapter only.
+    pub force_fallback_adapter: bool,
+}
+
+/// The compute pipelines and layouts, made once per context.
+pub(crate) struct Pipelines {
+    pub mesh_bgl: wgpu::BindGroupLayout,
+    pub trav_bgl: wgpu::BindGroupLayout,
+    pub ctrl_bgl: wgpu::BindGroupLayout,
+    pub boxes_bgl: wgpu::BindGroupLayout,
+    pub traverse: wgpu::ComputePipeline,
+    pub init: wgpu::ComputePipeline,
+    pub prepare: wgpu::ComputePipeline,
+    pub boxes: wgpu::ComputePipeline,
+}
+
+/// A device and queue with frcd-gpgpu's pipelines, plus counters of submissions and readbacks.
+///
+/// `Send + Sync`; queries take `&self` and caller-owned scratch objects.
+pub struct GpuContext {
+    pub(crate) device: wgpu::Device,
+    pub(crate) queue: wgpu::Queue,
+    pub(crate) limits: wgpu::Limits,
+    pub(crate) info: wgpu::AdapterInfo,
+    pub(crate) pipes: Pipelines,
+    pub(crate) id: u64,
+    submissions: AtomicU64,
+    readbacks: AtomicU64,
+}
+
+impl std::fmt::Debug for GpuContext {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuContext")
+            .field("adapter", &self.info.name)
+            .field("backend", &self.info.backend)
+            .field("submissions", &self.submissions())
+            .field("readbacks", &self.readbacks())
+            .finish()
+    }
+}
+
+fn unsupported(adapter: &str, what: &'static str, needed: u64, available: u64) -> GpuError {
+    GpuError::Unsupported {
+        adapter: adapter.to_string(),
+        what,
+        needed,
+        available,
+    }
+}
+
+/// First limit of `have` below [`requirements`].
+fn check_limits(have: &wgpu::Limits, adapter: &str) -> Result<(), GpuError> {
+    let mut first: Option<GpuError> = None;
+    requirements().check_limits_with_fail_fn(have, false, |what, needed, available| {
+        if first.is_none() {
+            first = Some(unsupported(adapter, what, needed, available));
+        }
+    });
+    first.map_or(Ok(()), Err)
+}
+
+fn check_downlevel(caps: &wgpu::DownlevelCapabilities, adapter: &str) -> Result<(), GpuError> {
+    for (flag, name) in [
+        (
+            wgpu::DownlevelFlags::COMPUTE_SHADERS,
+            "downlevel flag COMPUTE_SHADERS",
+        ),
+        (
+            wgpu::DownlevelFlags::INDIRECT_EXECUTION,
+            "downlevel flag INDIRECT_EXECUTION",
+        ),
+    ] {
+        if !caps.flags.contains(flag) {
+            return Err(unsupported(adapter, name, 1, 0));
+        }
+    }
+    Ok(())
+}
+
+impl GpuContext {
+    /// A context on a new device of the best adapter (honours `WGPU_BACKEND`,
+    /// `WGPU_ADAPTER_NAME`, `WGPU_POWER_PREF`). Asks for every limit the adapter offers, so the
+    /// largest meshes fit.
+    pub fn headless() -> Result<Self, GpuError> {
+        Self::headless_with(&HeadlessOptions::default())
+    }
+
+    /// [`GpuContext::headless`] with options.
+    pub fn headless_with(options: &HeadlessOptions) -> Result<Self, GpuError> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = if options.low_power || options.force_fallback_adapter {
+            pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: if options.low_power {
+                    wgpu::PowerPreference::LowPower
+                } else {
+                    wgpu::PowerPreference::HighPerformance
+                },
+                force_fallback_adapter: options.force_fallback_adapter,
+                compatible_surface: None,
+                ..Default::default()
+            }))
+        } else {
+            pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
+                &instance, None,
+            ))
+        }
+        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let info = adapter.get_info();
+        check_downlevel(&adapter.get_downlevel_capabilities(), &info.name)?;
+        let limits = adapter.limits();
+        check_limits(&limits, &info.name)?;
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("frcd-gpgpu"),
+            required_features: wgpu::Features::empty(),
+            required_limits: limits,
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::RequestDevice {
+            adapter: info.name.clone(),
+            reason: e.to_string(),
+        })?;
+        log::info!(
+            "frcd-gpgpu: adapter '{}' ({:?}, {:?})",
+            info.name,
+            info.backend,
+            info.device_type
+        );
+        Self::from_device(device, queue)
+    }
+
+    /// A context on the caller's device and queue (an engine's own). The device's limits are
+    /// checked against [`requirements`]; the downlevel flags cannot be read from a device, use
+    /// [`GpuContext::from_adapter`] to check them too.
+    pub fn from_device(device: wgpu::Device, queue: wgpu::Queue) -> Result<Self, GpuError> {
+        let info = device.adapter_info();
+        let limits = device.limits();
+        check_limits(&limits, &info.name)?;
+        // A driver that rejects a shader or pipeline gives a typed error, not a panic.
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let pipes = Pipelines::new(&device);
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Pipeline {
+                adapter: info.name.clone(),
+                reason: e.to_string(),
+            });
+        }
+        Ok(Self {
+            device,
+            queue,
+            limits,
+            info,
+            pipes,
+            id: NEXT_CONTEXT_ID.fetch_add(1, Ordering::Relaxed),
+            submissions: AtomicU64::new(0),
+            readbacks: AtomicU64::new(0),
+        })
+    }
+
+    /// [`GpuContext::from_device`], also checking the adapter's downlevel capabilities.
+    pub fn from_adapter(
+        adapter: &wgpu::Adapter,
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+    ) -> Result<Self, GpuError> {
+        check_downlevel(
+            &adapter.get_downlevel_capabilities(),
+            &adapter.get_info().name,
+        )?;
+        Self::from_device(device, queue)
+    }
+
+    /// The device.
+    pub fn device(&self) -> &wgpu::Device {
+        &self.device
+    }
+
+    /// The queue.
+    pub fn queue(&self) -> &wgpu::Queue {
+        &self.queue
+    }
+
+    /// The adapter's description (name, backend, device type).
+    pub fn adapter_info(&self) -> &wgpu::AdapterInfo {
+        &self.info
+    }
+
+    /// The device's limits, as used for texture splitting and buffer capacities.
+    pub fn limits(&self) -> &wgpu::Limits {
+        &self.limits
+    }
+
+    /// True when the adapter is a software rasterizer (lavapipe, llvmpipe, WARP).
+    pub fn is_software(&self) -> bool {
+        self.info.device_type == wgpu::DeviceType::Cpu
+    }
+
+    /// Command-buffer submissions made by this context so far (a query makes one, plus one per
+    /// overflow re-run).
+    pub fn submissions(&self) -> u64 {
+        self.submissions.load(Ordering::Relaxed)
+    }
+
+    /// Buffer readbacks (maps for reading) made by this context so far (one per submission).
+    pub fn readbacks(&self) -> u64 {
+        self.readbacks.load(Ordering::Relaxed)
+    }
+
+    /// Submits one command buffer (counted).
+    pub(crate) fn submit(&self, cmd: wgpu::CommandBuffer) {
+        self.submissions.fetch_add(1, Ordering::Relaxed);
+        self.queue.submit([cmd]);
+    }
+
+    /// Maps `staging[..len]` for reading, waits, and returns a copy of the bytes (counted).
+    pub(crate) fn read_back(&self, staging: &wgpu::Buffer, len: u64) -> Result<Vec<u8>, GpuError> {
+        self.readbacks.fetch_add(1, Ordering::Relaxed);
+        let slice = staging.slice(..len);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        rx.recv()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let bytes = {
+            let view = slice
+                .get_mapped_range()
+                .map_err(|e| GpuError::Readback(format!("{e:?}")))?;
+            view.to_vec()
+        };
+        staging.unmap();
+        Ok(bytes)
+    }
+
+    /// Largest byte size of one storage buffer binding.
+    pub(crate) fn max_storage_bytes(&self) -> u64 {
+        self.limits
+            .max_storage_buffer_binding_size
+            .min(self.limits.max_buffer_size)
+    }
+}
+
+/// A whole-buffer bind group entry.
+pub(crate) fn entry(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: b.as_entire_binding(),
+    }
+}
+
+fn storage(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn uniform(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn texture(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            view_dimension: wgpu::TextureViewDimension::D2Array,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+impl Pipelines {
+    fn new(device: &wgpu::Device) -> Self {
+        let bgl = |label: &str, entries: &[wgpu::BindGroupLayoutEntry]| {
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(label),
+                entries,
+            })
+        };
+        let mesh_bgl = bgl(
+            "frcd-gpgpu meshes",
+            &[
+                texture(0),
+                texture(1),
+                texture(2),
+                texture(3),
+                uniform(4),
+                uniform(5),
+                uniform(6),
+            ],
+        );
+        let trav_bgl = bgl(
+            "frcd-gpgpu traversal buffers",
+            &[
+                storage(0, true),
+                storage(1, false),
+                storage(2, false),
+                storage(3, false),
+                uniform(4),
+            ],
+        );
+        let ctrl_bgl = bgl(
+            "frcd-gpgpu control",
+            &[
+                storage(0, false),
+                storage(1, false),
+                storage(2, false),
+                uniform(3),
+            ],
+        );
+        let boxes_bgl = bgl(
+            "frcd-gpgpu boxes",
+            &[
+                storage(0, true),
+                storage(1, false),
+                storage(2, false),
+                uniform(3),
+            ],
+        );
+        let module = |label: &str, src: &str| {
+            device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(src.into()),
+            })
+        };
+        let traverse_mod = module("traverse.wgsl", shaders::TRAVERSE);
+        let control_mod = module("control.wgsl", shaders::CONTROL);
+        let boxes_mod = module("boxes.wgsl", shaders::BOXES);
+        let layout = |label: &str, groups: &[&wgpu::BindGroupLayout]| {
+            let groups: Vec<Option<&wgpu::BindGroupLayout>> =
+                groups.iter().map(|g| Some(*g)).collect();
+            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(label),
+                bind_group_layouts: &groups,
+                immediate_size: 0,
+            })
+        };
+        let trav_layout = layout("frcd-gpgpu traverse", &[&mesh_bgl, &trav_bgl]);
+        let ctrl_layout = layout("frcd-gpgpu control", &[&ctrl_bgl]);
+        let boxes_layout = layout("frcd-gpgpu boxes", &[&boxes_bgl]);
+        let pipeline = |label: &str,
+                        layout: &wgpu::PipelineLayout,
+                        module: &wgpu::ShaderModule,
+                        entry: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(label),
+                layout: Some(layout),
+                module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        Self {
+            traverse: pipeline(
+                "frcd-gpgpu traverse",
+                &trav_layout,
+                &traverse_mod,
+                "traverse",
+            ),
+            init: pipeline("frcd-gpgpu init", &ctrl_layout, &control_mod, "init"),
+            prepare: pipeline("frcd-gpgpu prepare", &ctrl_layout, &control_mod, "prepare"),
+            boxes: pipeline("frcd-gpgpu boxes", &boxes_layout, &boxes_mod, "overlap"),
+            mesh_bgl,
+            trav_bgl,
+            ctrl_bgl,
+            boxes_bgl,
+        }
+    }
+}

@@ -1,0 +1,450 @@
+//! CPU side of the texture mapping: an f64 OBB tree becomes f32 texels, rounded so that the f32
+//! boxes contain the f64 ones.
+//!
+//! Layout (both textures `rgba32float`, 2D arrays, item `i` at slot `i` in row-major order over
+//! (layer, row, item-in-row), see [`TexLayout::slot`]):
+//!
+//! | item | texels |
+//! |---|---|
+//! | node | `(c, 0) (a0, h0) (a1, h1) (a2, h2) (right, first, count, 0)` |
+//! | triangle (leaf order) | `(v0, mesh index) (v1, 0) (v2, 0)` |
+//!
+//! Indices are stored as f32, exact below 2^24, so trees are limited to 2^24 nodes and
+//! triangles ([`MAX_ITEMS`]).
+//!
+//! **Box rounding.** A node's f64 box is the parallelepiped `{c + A s : |s_i| <= h_i}`. Its f32
+//! image keeps `c32 = fl(c)`, `A32 = fl(A)` (rounded to nearest) and inflates the half extents by
+//! `eta = (u ‖c‖₂ + √3 u ‖h‖₂) / σ_min(A32)` (`u = 2^-24`), rounded up: any point `c + A s` equals
+//! `c32 + A32 (s + Δs)` with `‖Δs‖∞ <= ‖A32⁻¹‖ ‖(c - c32) + (A - A32) s‖₂ <= eta`, so the f32 box
+//! holds the f64 box. The GPU's separating-axis test projects parallelepipeds exactly (it does not
+//! assume orthonormal axes) and bounds its own arithmetic.
+
+use crate::GpuError;
+use frcd_geom::{DMat3, DVec3, Obb};
+use frcd_obb::ObbTree;
+
+/// Texels per node.
+pub const NODE_TEXELS: u32 = 5;
+/// Texels per triangle.
+pub const TRI_TEXELS: u32 = 3;
+/// Indices are stored as f32 and must stay exact: at most this many nodes or triangles.
+pub const MAX_ITEMS: u64 = 1 << 24;
+/// Unit roundoff of f32 round-to-nearest, 2^-24.
+pub const U32: f64 = 1.0 / 16_777_216.0;
+
+/// Where the items of one kind live in a 2D array texture.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TexLayout {
+    /// Texels per item.
+    pub texels_per_item: u32,
+    /// Items per texture row.
+    pub items_per_row: u32,
+    /// Rows per array layer (the texture's height).
+    pub rows_per_layer: u32,
+    /// Array layers.
+    pub layers: u32,
+}
+
+impl TexLayout {
+    /// The layout of `items` items (at least one slot) of `texels_per_item` texels, in textures
+    /// at most `max_width` texels wide and `max_rows` tall with at most `max_layers` layers:
+    /// a single row when it fits, else full rows, else full layers.
+    pub fn new(
+        items: usize,
+        texels_per_item: u32,
+        max_width: u32,
+        max_rows: u32,
+        max_layers: u32,
+    ) -> Result<Self, GpuError> {
+        let items = items.max(1) as u64;
+        let per_row_max = (max_width / texels_per_item) as u64;
+        if per_row_max == 0 || max_rows == 0 || max_layers == 0 {
+            return Err(GpuError::MeshTooLarge {
+                what: "texture width in texels (one item per row)",
+                needed: texels_per_item as u64,
+                limit: max_width as u64,
+            });
+        }
+        let rows_total = items.div_ceil(per_row_max);
+        let (items_per_row, rows, layers) = if rows_total == 1 {
+            (items, 1, 1)
+        } else if rows_total <= max_rows as u64 {
+            (per_row_max, rows_total, 1)
+        } else {
+            let layers = rows_total.div_ceil(max_rows as u64);
+            if layers > max_layers as u64 {
+                return Err(GpuError::MeshTooLarge {
+                    what: "texture array layers",
+                    needed: layers,
+                    limit: max_layers as u64,
+                });
+            }
+            (per_row_max, max_rows as u64, layers)
+        };
+        Ok(Self {
+            texels_per_item,
+            items_per_row: items_per_row as u32,
+            rows_per_layer: rows as u32,
+            layers: layers as u32,
+        })
+    }
+
+    /// Texture width in texels.
+    pub fn width(&self) -> u32 {
+        self.items_per_row * self.texels_per_item
+    }
+
+    /// Texels in the whole texture (all layers).
+    pub fn texel_count(&self) -> usize {
+        self.width() as usize * self.rows_per_layer as usize * self.layers as usize
+    }
+
+    /// `(column, row, layer)` of texel `k` of item `i` (the shaders' `load`).
+    pub fn slot(&self, i: u32, k: u32) -> (u32, u32, u32) {
+        let row_g = i / self.items_per_row;
+        let col = (i % self.items_per_row) * self.texels_per_item + k;
+        (
+            col,
+            row_g % self.rows_per_layer,
+            row_g / self.rows_per_layer,
+        )
+    }
+
+    /// Index of texel `k` of item `i` in a layer-major, row-major texel array.
+    pub fn linear(&self, i: u32, k: u32) -> usize {
+        let (x, y, l) = self.slot(i, k);
+        (l as usize * self.rows_per_layer as usize + y as usize) * self.width() as usize
+            + x as usize
+    }
+
+    /// `[items_per_row, rows_per_layer, a, b]` as the shaders' `vec4<u32>`.
+    pub fn uniform(&self, a: u32, b: u32) -> [u32; 4] {
+        [self.items_per_row, self.rows_per_layer, a, b]
+    }
+}
+
+/// The largest texture the packing may use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TexLimits {
+    /// Texels per row.
+    pub max_width: u32,
+    /// Rows per layer.
+    pub max_rows: u32,
+    /// Array layers.
+    pub max_layers: u32,
+}
+
+/// A tree packed into texel arrays, ready to upload.
+#[derive(Clone, Debug)]
+pub struct PackedTree {
+    /// Node texels (layout [`PackedTree::node_layout`]).
+    pub nodes: Vec<[f32; 4]>,
+    /// Placement of nodes.
+    pub node_layout: TexLayout,
+    /// Triangle texels in leaf order (layout [`PackedTree::tri_layout`]).
+    pub tris: Vec<[f32; 4]>,
+    /// Placement of triangles.
+    pub tri_layout: TexLayout,
+    /// Depth of the tree (a single leaf: 1): the traversal records this many levels.
+    pub depth: u32,
+}
+
+/// `x` rounded to the nearest f32 at or above it (f32::MAX for values above it, +inf stays).
+pub fn round_up(x: f64) -> f32 {
+    let f = x as f32;
+    if (f as f64) < x { f.next_up() } else { f }
+}
+
+/// `x` rounded to the nearest f32 at or below it.
+pub fn round_down(x: f64) -> f32 {
+    let f = x as f32;
+    if (f as f64) > x { f.next_down() } else { f }
+}
+
+/// An OBB in f32 whose parallelepiped `{c + A s : |s_i| <= h_i}` holds the f64 one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ObbF32 {
+    /// Centre, rounded to nearest.
+    pub center: [f32; 3],
+    /// Axes (columns), rounded to nearest.
+    pub axes: [[f32; 3]; 3],
+    /// Half extents, inflated and rounded up.
+    pub half_extents: [f32; 3],
+}
+
+fn v3(v: DVec3) -> [f32; 3] {
+    [v.x as f32, v.y as f32, v.z as f32]
+}
+
+fn back(v: [f32; 3]) -> DVec3 {
+    DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64)
+}
+
+/// Rounds a node box to f32 outward (see the module docs). `node` only names the node in
+/// errors: non-finite boxes and axes that are not orthonormal to 1e-3 are refused.
+pub fn obb_to_f32(obb: &Obb, node: usize) -> Result<ObbF32, GpuError> {
+    let a = obb.axes;
+    if !(obb.center.is_finite() && a.is_finite() && obb.half_extents.is_finite())
+        || obb.half_extents.min_element() < 0.0
+    {
+        return Err(GpuError::InvalidInput(format!(
+            "OBB node {node} is not finite or has a negative extent"
+        )));
+    }
+    let gram = a.transpose() * a - DMat3::IDENTITY;
+    let deviation = [gram.x_axis, gram.y_axis, gram.z_axis]
+        .iter()
+        .map(|c| c.abs().max_element())
+        .fold(0.0, f64::max);
+    if deviation > 1e-3 {
+        return Err(GpuError::BadNodeAxes { node, deviation });
+    }
+    // ‖AᵀA - I‖₂ <= 3·deviation bounds σ_min(A)² from below; A32 differs by ‖·‖_F <= √3 u.
+    let sigma_min = (1.0 - 3.0 * deviation).sqrt() - 3f64.sqrt() * U32 * 1.001;
+    let axes = [v3(a.x_axis), v3(a.y_axis), v3(a.z_axis)];
+    let center = v3(obb.center);
+    // The residual is taken from the actual rounding, with the u-bound as a floor for safety.
+    let dc = (obb.center - back(center)).length();
+    let da = (a.x_axis - back(axes[0])).length_squared()
+        + (a.y_axis - back(axes[1])).length_squared()
+        + (a.z_axis - back(axes[2])).length_squared();
+    let residual = dc.max(U32 * obb.center.length())
+        + da.sqrt().max(3f64.sqrt() * U32) * obb.half_extents.length();
+    // 1e-6 relative margin covers the f64 arithmetic of this bound.
+    let eta = residual / sigma_min * (1.0 + 1e-6);
+    let h = obb.half_extents;
+    Ok(ObbF32 {
+        center,
+        axes,
+        half_extents: [
+            round_up(h.x + eta),
+            round_up(h.y + eta),
+            round_up(h.z + eta),
+        ],
+    })
+}
+
+fn depth_of(tree: &ObbTree) -> u32 {
+    let nodes = tree.nodes();
+    let mut best = 0;
+    let mut stack = vec![(0usize, 1u32)];
+    while let Some((i, d)) = stack.pop() {
+        best = best.max(d);
+        let n = &nodes[i];
+        if !n.is_leaf() {
+            stack.push((i + 1, d + 1));
+            stack.push((n.right as usize, d + 1));
+        }
+    }
+    best
+}
+
+/// Checks the tree's structure (the shaders trust it) and packs it.
+pub fn pack_tree(tree: &ObbTree, limits: &TexLimits) -> Result<PackedTree, GpuError> {
+    let nodes = tree.nodes();
+    let order = tree.leaf_triangles();
+    let tris = tree.triangles();
+    if nodes.is_empty() || tris.is_empty() {
+        return Err(GpuError::InvalidInput("empty tree".into()));
+    }
+    for (what, n) in [("nodes", nodes.len()), ("triangles", tris.len())] {
+        if n as u64 >= MAX_ITEMS {
+            return Err(GpuError::MeshTooLarge {
+                what: if what == "nodes" {
+                    "node count (f32-exact indices)"
+                } else {
+                    "triangle count (f32-exact indices)"
+                },
+                needed: n as u64,
+                limit: MAX_ITEMS - 1,
+            });
+        }
+    }
+    if order.len() != tris.len() {
+        return Err(GpuError::InvalidInput(format!(
+            "leaf order has {} entries for {} triangles",
+            order.len(),
+            tris.len()
+        )));
+    }
+    let node_layout = TexLayout::new(
+        nodes.len(),
+        NODE_TEXELS,
+        limits.max_width,
+        limits.max_rows,
+        limits.max_layers,
+    )?;
+    let tri_layout = TexLayout::new(
+        tris.len(),
+        TRI_TEXELS,
+        limits.max_width,
+        limits.max_rows,
+        limits.max_layers,
+    )?;
+    let mut node_texels = vec![[0f32; 4]; node_layout.texel_count()];
+    for (i, n) in nodes.iter().enumerate() {
+        let ok = if n.is_leaf() {
+            n.first as usize + n.count as usize <= order.len()
+        } else {
+            (n.right as usize) > i + 1 && (n.right as usize) < nodes.len()
+        };
+        if !ok {
+            return Err(GpuError::InvalidInput(format!(
+                "OBB node {i}: child or triangle range out of bounds"
+            )));
+        }
+        let b = obb_to_f32(&n.obb, i)?;
+        let t = [
+            [b.center[0], b.center[1], b.center[2], 0.0],
+            [b.axes[0][0], b.axes[0][1], b.axes[0][2], b.half_extents[0]],
+            [b.axes[1][0], b.axes[1][1], b.axes[1][2], b.half_extents[1]],
+            [b.axes[2][0], b.axes[2][1], b.axes[2][2], b.half_extents[2]],
+            [n.right as f32, n.first as f32, n.count as f32, 0.0],
+        ];
+        for (k, texel) in t.into_iter().enumerate() {
+            node_texels[node_layout.linear(i as u32, k as u32)] = texel;
+        }
+    }
+    let mut tri_texels = vec![[0f32; 4]; tri_layout.texel_count()];
+    for (slot, &index) in order.iter().enumerate() {
+        let tri = tris.get(index as usize).ok_or_else(|| {
+            GpuError::InvalidInput(format!("leaf order names triangle {index}, out of range"))
+        })?;
+        if !tri.is_finite() {
+            return Err(GpuError::InvalidInput(format!(
+                "triangle {index} has a non-finite coordinate"
+            )));
+        }
+        for k in 0..3 {
+            let p = v3(tri.v[k]);
+            let w = if k == 0 { index as f32 } else { 0.0 };
+            tri_texels[tri_layout.linear(slot as u32, k as u32)] = [p[0], p[1], p[2], w];
+        }
+    }
+    Ok(PackedTree {
+        nodes: node_texels,
+        node_layout,
+        tris: tri_texels,
+        tri_layout,
+        depth: depth_of(tree),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use frcd_geom::{DQuat, Pose, shapes};
+    use frcd_obb::BuildOptions;
+
+    #[test]
+    fn layout_single_row_rows_and_layers() {
+        let l = TexLayout::new(10, 5, 1000, 100, 4).unwrap();
+        assert_eq!((l.items_per_row, l.rows_per_layer, l.layers), (10, 1, 1));
+        let l = TexLayout::new(10, 5, 12, 100, 4).unwrap();
+        assert_eq!((l.items_per_row, l.rows_per_layer, l.layers), (2, 5, 1));
+        let l = TexLayout::new(10, 5, 12, 2, 4).unwrap();
+        assert_eq!((l.items_per_row, l.rows_per_layer, l.layers), (2, 2, 3));
+        assert!(matches!(
+            TexLayout::new(10, 5, 12, 2, 2),
+            Err(GpuError::MeshTooLarge { .. })
+        ));
+        assert!(TexLayout::new(1, 5, 4, 2, 2).is_err());
+        // Every slot distinct and inside the texture.
+        let mut seen = std::collections::HashSet::new();
+        for i in 0..10 {
+            for k in 0..5 {
+                let (x, y, z) = l.slot(i, k);
+                assert!(x < l.width() && y < l.rows_per_layer && z < l.layers);
+                assert!(seen.insert(l.linear(i, k)));
+                assert!(l.linear(i, k) < l.texel_count());
+            }
+        }
+    }
+
+    #[test]
+    fn rounding_is_directed() {
+        for x in [0.1, -0.1, 1e-40, 3.0, 1e300, -1e300, 0.0] {
+            assert!(round_up(x) as f64 >= x, "{x}");
+            assert!(round_down(x) as f64 <= x, "{x}");
+        }
+    }
+
+    /// Solves `A32 s = p - c32` in f64 and checks `|s_i| <= h32_i`.
+    fn inside(b: &ObbF32, p: DVec3) -> bool {
+        let a = DMat3::from_cols(back(b.axes[0]), back(b.axes[1]), back(b.axes[2]));
+        let s = a.inverse() * (p - back(b.center));
+        (0..3).all(|i| s[i].abs() <= b.half_extents[i] as f64)
+    }
+
+    fn subtree_triangles(tree: &ObbTree, i: usize, out: &mut Vec<u32>) {
+        let n = &tree.nodes()[i];
+        if n.is_leaf() {
+            out.extend_from_slice(
+                &tree.leaf_triangles()[n.first as usize..(n.first + n.count) as usize],
+            );
+        } else {
+            subtree_triangles(tree, i + 1, out);
+            subtree_triangles(tree, n.right as usize, out);
+        }
+    }
+
+    #[test]
+    fn f32_boxes_hold_every_vertex_far_from_the_origin() {
+        // A mesh far from its local origin, rotated: rounding of centres and axes is large.
+        let pose = Pose::new(
+            DVec3::new(3.0e3, -1.7e3, 512.3),
+            DQuat::from_axis_angle(DVec3::new(0.3, -1.1, 2.0).normalize(), 2.2),
+        );
+        let mesh = shapes::icosphere(0.7, 3).transformed(&pose);
+        let tree = ObbTree::build(&mesh, &BuildOptions::default());
+        for (i, n) in tree.nodes().iter().enumerate() {
+            let b = obb_to_f32(&n.obb, i).unwrap();
+            let mut tris = Vec::new();
+            subtree_triangles(&tree, i, &mut tris);
+            for t in tris {
+                for p in tree.triangles()[t as usize].v {
+                    assert!(inside(&b, p), "node {i} misses {p:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn packed_tree_round_trips_through_the_layout() {
+        let mesh = shapes::icosphere(1.0, 2);
+        let tree = ObbTree::build(&mesh, &BuildOptions::default());
+        let limits = TexLimits {
+            max_width: 17,
+            max_rows: 7,
+            max_layers: 64,
+        };
+        let p = pack_tree(&tree, &limits).unwrap();
+        assert!(p.node_layout.layers > 1 && p.tri_layout.layers > 1);
+        for (i, n) in tree.nodes().iter().enumerate() {
+            let t4 = p.nodes[p.node_layout.linear(i as u32, 4)];
+            assert_eq!(t4[0] as u32, n.right);
+            assert_eq!(t4[1] as u32, n.first);
+            assert_eq!(t4[2] as u32, n.count);
+        }
+        for (slot, &index) in tree.leaf_triangles().iter().enumerate() {
+            let t0 = p.tris[p.tri_layout.linear(slot as u32, 0)];
+            assert_eq!(t0[3] as u32, index);
+            let v = tree.triangles()[index as usize].v[0];
+            assert_eq!(t0[0], v.x as f32);
+        }
+        assert!(p.depth >= 7, "{}", p.depth);
+    }
+
+    #[test]
+    fn bad_axes_are_refused() {
+        let obb = Obb {
+            center: DVec3::ZERO,
+            axes: DMat3::from_cols(DVec3::X, DVec3::X, DVec3::Z),
+            half_extents: DVec3::ONE,
+        };
+        assert!(matches!(
+            obb_to_f32(&obb, 3),
+            Err(GpuError::BadNodeAxes { node: 3, .. })
+        ));
+    }
+}

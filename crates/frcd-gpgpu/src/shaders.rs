@@ -1,0 +1,15 @@
+//! The WGSL sources (from `shaders/gpgpu/`), compiled into the crate.
+
+/// One level of the pair-tree traversal: OBB separating-axis test and triangle test.
+pub const TRAVERSE: &str = include_str!("../../../shaders/gpgpu/traverse.wgsl");
+/// Single-invocation control passes: query start and per-level indirect arguments.
+pub const CONTROL: &str = include_str!("../../../shaders/gpgpu/control.wgsl");
+/// All-pairs box overlap of many bodies.
+pub const BOXES: &str = include_str!("../../../shaders/gpgpu/boxes.wgsl");
+
+/// Every shader of the crate as `(file name, source)`.
+pub const ALL: [(&str, &str); 3] = [
+    ("traverse.wgsl", TRAVERSE),
+    ("control.wgsl", CONTROL),
+    ("boxes.wgsl", BOXES),
+];

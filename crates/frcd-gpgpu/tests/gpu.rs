@@ -1,0 +1,569 @@
+//! GPU tests: every answer compared with the exact CPU oracle (`frcd_obb::oracle`), on the
+//! software adapter where no GPU exists. Without any adapter they print `SKIP` and pass, unless
+//! `FRCD_REQUIRE_GPU=1`, where they fail.
+
+use frcd_geom::shapes::{self, TorusKnotParams};
+use frcd_geom::{Aabb, DQuat, DVec3, Pose, TriMesh};
+use frcd_gpgpu::{BoxScratch, GpuContext, GpuError, GpuMesh, QueryScratch, UploadOptions};
+use frcd_obb::{BuildOptions, ObbTree, oracle};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use std::sync::OnceLock;
+
+fn require_gpu() -> bool {
+    std::env::var("FRCD_REQUIRE_GPU").is_ok_and(|v| v == "1")
+}
+
+fn new_context() -> Option<GpuContext> {
+    match GpuContext::headless() {
+        Ok(c) => Some(c),
+        Err(e) => {
+            assert!(
+                !require_gpu(),
+                "FRCD_REQUIRE_GPU=1 but no usable adapter: {e}"
+            );
+            println!("SKIP frcd-gpgpu GPU test: {e}");
+            None
+        }
+    }
+}
+
+/// One context shared by the tests that do not count submissions.
+fn shared() -> Option<&'static GpuContext> {
+    static CTX: OnceLock<Option<GpuContext>> = OnceLock::new();
+    CTX.get_or_init(new_context).as_ref()
+}
+
+fn tree(mesh: &TriMesh) -> ObbTree {
+    ObbTree::build(mesh, &BuildOptions::default())
+}
+
+struct Body {
+    mesh: TriMesh,
+    gpu: GpuMesh,
+}
+
+fn body(ctx: &GpuContext, mesh: TriMesh) -> Body {
+    let gpu = ctx.upload(&tree(&mesh)).expect("upload");
+    Body { mesh, gpu }
+}
+
+/// Runs the GPU query and the oracle at each pose pair; returns (total pairs, total uncertain).
+/// With `check_decided`, also checks that the GPU decided most touching pairs itself (the CPU
+/// fallback is the exception, not the rule).
+fn agree(
+    ctx: &GpuContext,
+    a: &Body,
+    b: &Body,
+    poses: &[(Pose, Pose)],
+    scratch: &mut QueryScratch,
+    check_decided: bool,
+) -> (usize, usize) {
+    let mut total = (0, 0);
+    let mut decided = 0;
+    for (k, (pa, pb)) in poses.iter().enumerate() {
+        let gpu = ctx
+            .collide(&a.gpu, pa, &b.gpu, pb, scratch)
+            .unwrap_or_else(|e| panic!("pose {k}: {e}"));
+        let want = oracle::pairs(&a.mesh, pa, &b.mesh, pb);
+        if gpu.pairs != want {
+            let extra: Vec<_> = gpu.pairs.iter().filter(|p| !want.contains(p)).collect();
+            let missing: Vec<_> = want.iter().filter(|p| !gpu.pairs.contains(p)).collect();
+            panic!(
+                "pose {k} ({pa:?}, {pb:?}): GPU {} pairs, oracle {}; extra {:?}, missing {:?}",
+                gpu.pairs.len(),
+                want.len(),
+                &extra[..extra.len().min(8)],
+                &missing[..missing.len().min(8)]
+            );
+        }
+        total.0 += want.len();
+        total.1 += gpu.uncertain;
+        decided += gpu.gpu_decided;
+    }
+    if check_decided {
+        assert!(
+            decided * 2 > total.0,
+            "the GPU decided only {decided} of {} touching pairs",
+            total.0
+        );
+    }
+    total
+}
+
+#[test]
+fn icospheres_through_each_other() {
+    let Some(ctx) = shared() else { return };
+    let a = body(ctx, shapes::icosphere(1.0, 3));
+    let b = body(ctx, shapes::icosphere(0.8, 3));
+    let poses: Vec<(Pose, Pose)> = (0..9)
+        .map(|k| {
+            let s = k as f64 / 8.0;
+            (
+                Pose::IDENTITY,
+                Pose::new(
+                    DVec3::new(-2.0 + 4.0 * s, 0.13, -0.07),
+                    DQuat::from_rotation_z(0.7 * s) * DQuat::from_rotation_x(0.4),
+                ),
+            )
+        })
+        .collect();
+    let (pairs, _) = agree(ctx, &a, &b, &poses, &mut QueryScratch::default(), true);
+    assert!(pairs > 100, "the sweep must produce contacts, got {pairs}");
+}
+
+#[test]
+fn torus_knots_in_near_contact() {
+    let Some(ctx) = shared() else { return };
+    let knot = shapes::torus_knot(&TorusKnotParams::default()).expect("knot");
+    let a = body(ctx, knot.clone());
+    let b = body(ctx, knot);
+    // Stacked along z by about two tube radii: grazing contact along many strands, plus
+    // tiny rotations that open and close the gaps.
+    let r = TorusKnotParams::default().tube_radius;
+    let mut poses = Vec::new();
+    for (k, dz) in [2.0 * r - 1e-3, 2.0 * r, 2.0 * r + 1e-9, 1.9 * r]
+        .into_iter()
+        .enumerate()
+    {
+        let at = Pose::new(DVec3::new(1e5, -2e5, 3e4), DQuat::from_rotation_y(0.2));
+        let rel = Pose::new(
+            DVec3::new(0.0, 0.0, dz),
+            DQuat::from_rotation_z(1e-3 * k as f64),
+        );
+        poses.push((at, at.compose(&rel)));
+    }
+    let (pairs, _) = agree(ctx, &a, &b, &poses, &mut QueryScratch::default(), true);
+    assert!(pairs > 0);
+}
+
+#[test]
+fn random_rotations() {
+    let Some(ctx) = shared() else { return };
+    let a = body(ctx, shapes::icosphere(1.0, 2));
+    let b = body(ctx, shapes::torus(0.8, 0.25, 32, 12).expect("torus"));
+    let c = body(ctx, shapes::cuboid(DVec3::new(0.9, 0.4, 0.2)));
+    let mut rng = StdRng::seed_from_u64(7);
+    let mut rot = || {
+        let axis = DVec3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        );
+        let axis = if axis.length() < 1e-3 {
+            DVec3::X
+        } else {
+            axis.normalize()
+        };
+        (
+            axis,
+            rng.random_range(0.0..6.3),
+            rng.random_range(-1.6..1.6),
+        )
+    };
+    let mut poses = Vec::new();
+    for _ in 0..12 {
+        let (ax1, an1, _) = rot();
+        let (ax2, an2, off) = rot();
+        poses.push((
+            Pose::new(DVec3::new(0.3, -0.2, 0.1), DQuat::from_axis_angle(ax1, an1)),
+            Pose::new(
+                DVec3::new(off, 0.5 * off, 0.0),
+                DQuat::from_axis_angle(ax2, an2),
+            ),
+        ));
+    }
+    let mut scratch = QueryScratch::default();
+    let (p1, _) = agree(ctx, &a, &b, &poses, &mut scratch, true);
+    let (p2, _) = agree(ctx, &c, &b, &poses, &mut scratch, true);
+    let (p3, _) = agree(ctx, &a, &a, &poses, &mut scratch, true);
+    assert!(p1 + p2 + p3 > 0);
+}
+
+#[test]
+fn touching_and_coplanar_configurations_go_to_the_exact_test() {
+    let Some(ctx) = shared() else { return };
+    let h = DVec3::new(0.5, 0.5, 0.5);
+    // Cubes whose local origin is far away: large local coordinates.
+    let far = Pose::from_translation(DVec3::new(1000.0, -250.0, 31.0));
+    let a = body(ctx, shapes::cuboid(h).transformed(&far));
+    let b = body(ctx, shapes::cuboid(h));
+    let inv = far;
+    let place = |t: DVec3, q: DQuat| (Pose::IDENTITY, inv.compose(&Pose::new(t, q)));
+    let poses = vec![
+        // Face to face, coplanar contact.
+        place(DVec3::new(1.0, 0.0, 0.0), DQuat::IDENTITY),
+        // Face to face, shifted half a side: coplanar overlap with crossing edges.
+        place(DVec3::new(1.0, 0.5, 0.25), DQuat::IDENTITY),
+        // Edge on face.
+        place(
+            DVec3::new(0.5 + 0.5 * 2f64.sqrt(), 0.0, 0.0),
+            DQuat::from_rotation_z(std::f64::consts::FRAC_PI_4),
+        ),
+        // Apart by one ulp-ish gap.
+        place(DVec3::new(1.0 + 1e-12, 0.0, 0.0), DQuat::IDENTITY),
+        // Identical boxes (every face coplanar with one of the other's).
+        place(DVec3::ZERO, DQuat::IDENTITY),
+    ];
+    let (pairs, uncertain) = agree(ctx, &a, &b, &poses, &mut QueryScratch::default(), false);
+    assert!(pairs > 0);
+    assert!(
+        uncertain > 0,
+        "coplanar contact must reach the CPU's exact test"
+    );
+}
+
+#[test]
+fn random_triangle_soups_all_pairs() {
+    // Many small random triangles through each other: almost every configuration the
+    // orientation form meets (each permutation branch) is exercised against the exact test.
+    let Some(ctx) = shared() else { return };
+    let mut rng = StdRng::seed_from_u64(42);
+    let mut soup = |n: usize, size: f64| {
+        let tris: Vec<[DVec3; 3]> = (0..n)
+            .map(|_| {
+                let c = DVec3::new(
+                    rng.random_range(0.0..1.0),
+                    rng.random_range(0.0..1.0),
+                    rng.random_range(0.0..1.0),
+                );
+                let mut v = || {
+                    c + size
+                        * DVec3::new(
+                            rng.random_range(-1.0..1.0),
+                            rng.random_range(-1.0..1.0),
+                            rng.random_range(-1.0..1.0),
+                        )
+                };
+                [v(), v(), v()]
+            })
+            .collect();
+        TriMesh::from_triangle_soup(&tris).expect("soup")
+    };
+    let a = body(ctx, soup(400, 0.12));
+    let b = body(ctx, soup(400, 0.12));
+    let poses = vec![
+        (Pose::IDENTITY, Pose::IDENTITY),
+        (
+            Pose::IDENTITY,
+            Pose::new(DVec3::new(0.05, -0.02, 0.1), DQuat::from_rotation_y(0.3)),
+        ),
+        (
+            Pose::from_translation(DVec3::splat(-7.0)),
+            Pose::new(DVec3::splat(-7.1), DQuat::from_rotation_x(2.0)),
+        ),
+    ];
+    let (pairs, _) = agree(ctx, &a, &b, &poses, &mut QueryScratch::default(), true);
+    assert!(pairs > 500, "{pairs}");
+}
+
+#[test]
+fn one_submission_and_one_readback_per_query() {
+    let Some(ctx) = new_context() else { return };
+    let a = body(&ctx, shapes::icosphere(1.0, 3));
+    let mut scratch = QueryScratch::with_capacity(1 << 16, 1 << 14);
+    let pa = Pose::IDENTITY;
+    for k in 0..4 {
+        let pb = Pose::from_translation(DVec3::new(0.5 + 0.5 * k as f64, 0.1, 0.0));
+        let (s0, r0) = (ctx.submissions(), ctx.readbacks());
+        let got = ctx.collide(&a.gpu, &pa, &a.gpu, &pb, &mut scratch).unwrap();
+        assert_eq!(ctx.submissions() - s0, 1, "query {k}");
+        assert_eq!(ctx.readbacks() - r0, 1, "query {k}");
+        assert_eq!((got.submissions, got.readbacks, got.reruns), (1, 1, 0));
+        assert_eq!(got.pairs, oracle::pairs(&a.mesh, &pa, &a.mesh, &pb));
+        assert!(got.levels >= 1 && got.node_pairs_tested >= 1);
+    }
+}
+
+#[test]
+fn overflow_is_detected_and_the_query_rerun() {
+    let Some(ctx) = new_context() else { return };
+    let a = body(&ctx, shapes::icosphere(1.0, 3));
+    let pb = Pose::new(DVec3::new(0.9, 0.2, 0.0), DQuat::from_rotation_y(0.5));
+    let want = oracle::pairs(&a.mesh, &Pose::IDENTITY, &a.mesh, &pb);
+    assert!(want.len() > 10);
+    // Both buffers far too small: frontier of 1 pair, output of 1 pair.
+    let mut scratch = QueryScratch::with_capacity(1, 1);
+    let s0 = ctx.submissions();
+    let got = ctx
+        .collide(&a.gpu, &Pose::IDENTITY, &a.gpu, &pb, &mut scratch)
+        .unwrap();
+    assert_eq!(got.pairs, want, "never a truncated answer");
+    assert!(got.reruns >= 1);
+    assert_eq!(got.submissions, 1 + got.reruns);
+    assert_eq!(got.readbacks, got.submissions);
+    assert_eq!(ctx.submissions() - s0, got.submissions as u64);
+    let (f, o) = scratch.capacity();
+    assert!(f > 1 && o as usize >= want.len());
+    // The grown scratch is kept: the same query now needs one submission.
+    let again = ctx
+        .collide(&a.gpu, &Pose::IDENTITY, &a.gpu, &pb, &mut scratch)
+        .unwrap();
+    assert_eq!(again.pairs, want);
+    assert_eq!((again.submissions, again.reruns), (1, 0));
+}
+
+#[test]
+fn meshes_split_across_rows_and_layers() {
+    let Some(ctx) = shared() else { return };
+    let mesh = shapes::icosphere(1.0, 3);
+    let t = tree(&mesh);
+    let opts = UploadOptions {
+        max_texture_width: Some(16),
+        max_texture_rows: Some(8),
+    };
+    let split = ctx.upload_with(&t, &opts).unwrap();
+    assert!(split.node_layout().layers > 1 && split.triangle_layout().layers > 1);
+    assert!(split.node_layout().rows_per_layer == 8);
+    let whole = ctx.upload(&t).unwrap();
+    let a = Body {
+        mesh: mesh.clone(),
+        gpu: split,
+    };
+    let b = Body { mesh, gpu: whole };
+    let poses: Vec<(Pose, Pose)> = (0..4)
+        .map(|k| {
+            (
+                Pose::IDENTITY,
+                Pose::new(
+                    DVec3::new(0.4 * k as f64 + 0.3, 0.2, 0.0),
+                    DQuat::from_rotation_x(k as f64),
+                ),
+            )
+        })
+        .collect();
+    let (pairs, _) = agree(ctx, &a, &b, &poses, &mut QueryScratch::default(), true);
+    assert!(pairs > 0);
+}
+
+#[test]
+fn objects_of_another_context_are_refused() {
+    let Some(ctx) = shared() else { return };
+    let Some(other) = new_context() else { return };
+    let t = tree(&shapes::icosphere(1.0, 1));
+    let mine = ctx.upload(&t).unwrap();
+    let theirs = other.upload(&t).unwrap();
+    let err = ctx
+        .collide(
+            &mine,
+            &Pose::IDENTITY,
+            &theirs,
+            &Pose::IDENTITY,
+            &mut QueryScratch::default(),
+        )
+        .unwrap_err();
+    assert!(matches!(err, GpuError::ForeignObject("GpuMesh")), "{err}");
+    let mut scratch = QueryScratch::default();
+    ctx.collide(&mine, &Pose::IDENTITY, &mine, &Pose::IDENTITY, &mut scratch)
+        .unwrap();
+    let theirs2 = other.upload(&t).unwrap();
+    let err = other
+        .collide(
+            &theirs,
+            &Pose::IDENTITY,
+            &theirs2,
+            &Pose::IDENTITY,
+            &mut scratch,
+        )
+        .unwrap_err();
+    assert!(
+        matches!(err, GpuError::ForeignObject("QueryScratch")),
+        "{err}"
+    );
+    let bad = Pose {
+        translation: DVec3::new(f64::NAN, 0.0, 0.0),
+        rotation: DQuat::IDENTITY,
+    };
+    let err = ctx
+        .collide(
+            &mine,
+            &Pose::IDENTITY,
+            &mine,
+            &bad,
+            &mut QueryScratch::default(),
+        )
+        .unwrap_err();
+    assert!(matches!(err, GpuError::InvalidInput(_)), "{err}");
+}
+
+fn cpu_box_pairs(boxes: &[Aabb]) -> Vec<(u32, u32)> {
+    let mut out = Vec::new();
+    for i in 0..boxes.len() {
+        for j in i + 1..boxes.len() {
+            if boxes[i].intersects(&boxes[j]) {
+                out.push((i as u32, j as u32));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn many_bodies_box_pass_equals_the_cpu() {
+    let Some(ctx) = new_context() else { return };
+    let mut rng = StdRng::seed_from_u64(3);
+    let mut boxes: Vec<Aabb> = (0..700)
+        .map(|_| {
+            let c = DVec3::new(
+                rng.random_range(0.0..30.0),
+                rng.random_range(0.0..30.0),
+                rng.random_range(0.0..30.0),
+            ) + DVec3::splat(1e6);
+            let h = DVec3::new(
+                rng.random_range(0.0..1.5),
+                rng.random_range(0.0..1.5),
+                rng.random_range(0.0..1.5),
+            );
+            Aabb::new(c - h, c + h)
+        })
+        .collect();
+    // Exactly touching faces and a one-ulp gap far from the origin, where f32 cannot tell.
+    let base = Aabb::new(DVec3::splat(1e6 + 0.1), DVec3::splat(1e6 + 0.3));
+    let touch = Aabb::new(
+        DVec3::new(base.max.x, base.min.y, base.min.z),
+        base.max + DVec3::X,
+    );
+    let gap = Aabb::new(
+        DVec3::new(base.max.x.next_up(), base.min.y, base.min.z),
+        base.max + DVec3::X,
+    );
+    boxes.extend([base, touch, gap, Aabb::EMPTY]);
+    let want = cpu_box_pairs(&boxes);
+    let mut scratch = BoxScratch::with_capacity(1);
+    let s0 = ctx.submissions();
+    let got = ctx.overlapping_bodies(&boxes, &mut scratch).unwrap();
+    assert_eq!(got.pairs, want);
+    assert!(got.submissions >= 2, "the tiny output buffer must overflow");
+    assert_eq!(ctx.submissions() - s0, got.submissions as u64);
+    assert!(got.uncertain > 0, "the one-ulp cases need the f64 check");
+    let n = boxes.len() as u32;
+    assert!(want.contains(&(n - 4, n - 3)) && !want.contains(&(n - 4, n - 2)));
+    let again = ctx.overlapping_bodies(&boxes, &mut scratch).unwrap();
+    assert_eq!((again.submissions, again.readbacks), (1, 1));
+    assert_eq!(again.pairs, want);
+    let nan = [Aabb::new(DVec3::splat(f64::NAN), DVec3::ONE), base];
+    assert!(matches!(
+        ctx.overlapping_bodies(&nan, &mut scratch),
+        Err(GpuError::InvalidInput(_))
+    ));
+}
+
+fn adapter_and_device(
+    limits: frcd_gpgpu::wgpu::Limits,
+) -> Option<(
+    frcd_gpgpu::wgpu::Adapter,
+    frcd_gpgpu::wgpu::Device,
+    frcd_gpgpu::wgpu::Queue,
+)> {
+    use frcd_gpgpu::wgpu;
+    let instance =
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let adapter = match pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
+        &instance, None,
+    )) {
+        Ok(a) => a,
+        Err(e) => {
+            assert!(!require_gpu(), "FRCD_REQUIRE_GPU=1 but no adapter: {e}");
+            println!("SKIP: no adapter: {e}");
+            return None;
+        }
+    };
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        required_limits: limits,
+        ..Default::default()
+    }))
+    .expect("device");
+    Some((adapter, device, queue))
+}
+
+#[test]
+fn callers_device_is_used_and_its_limits_checked() {
+    use frcd_gpgpu::wgpu;
+    // An engine's own device with default limits: accepted, and queries work on it.
+    let Some((adapter, device, queue)) = adapter_and_device(wgpu::Limits::default()) else {
+        return;
+    };
+    let ctx = GpuContext::from_adapter(&adapter, device, queue).expect("default limits suffice");
+    let a = body(&ctx, shapes::icosphere(1.0, 2));
+    let pb = Pose::from_translation(DVec3::new(1.1, 0.0, 0.2));
+    let got = ctx
+        .collide(
+            &a.gpu,
+            &Pose::IDENTITY,
+            &a.gpu,
+            &pb,
+            &mut QueryScratch::default(),
+        )
+        .unwrap();
+    assert_eq!(
+        got.pairs,
+        oracle::pairs(&a.mesh, &Pose::IDENTITY, &a.mesh, &pb)
+    );
+    // A device created with WebGL2-level limits (no storage buffers in compute): refused with
+    // the limit named, read from the device rather than assumed.
+    let Some((_, device, queue)) = adapter_and_device(wgpu::Limits::downlevel_webgl2_defaults())
+    else {
+        return;
+    };
+    match GpuContext::from_device(device, queue) {
+        Err(GpuError::Unsupported {
+            what,
+            needed,
+            available,
+            ..
+        }) => {
+            assert!(needed > available, "{what}: {needed} vs {available}");
+        }
+        other => panic!("expected Unsupported, got {other:?}"),
+    }
+}
+
+#[test]
+fn meshes_that_do_not_fit_are_a_typed_error() {
+    let Some(ctx) = shared() else { return };
+    let t = tree(&shapes::icosphere(1.0, 1));
+    let narrow = UploadOptions {
+        max_texture_width: Some(4),
+        max_texture_rows: None,
+    };
+    assert!(matches!(
+        ctx.upload_with(&t, &narrow),
+        Err(GpuError::MeshTooLarge { .. })
+    ));
+}
+
+#[test]
+fn public_types_are_send_and_sync() {
+    fn check<T: Send + Sync>() {}
+    check::<GpuContext>();
+    check::<GpuMesh>();
+    check::<QueryScratch>();
+    check::<BoxScratch>();
+    check::<GpuError>();
+}
+
+#[test]
+fn meshes_far_from_their_local_origin() {
+    // f32 keeps ~7 digits: 1e3..3e4 away from the local origin the rounding is a sizeable
+    // fraction of a triangle, so the box and triangle error bounds carry the answer.
+    let Some(ctx) = shared() else { return };
+    for offset in [
+        DVec3::new(1.0e3, -700.0, 250.0),
+        DVec3::new(3.0e4, -1.0e4, 5.0e3),
+    ] {
+        let at = Pose::from_translation(offset);
+        let mesh = shapes::icosphere(1.0, 3).transformed(&at);
+        let a = body(ctx, mesh.clone());
+        let b = body(ctx, mesh);
+        // B turned about the sphere's centre and shifted: the spheres cross.
+        let poses: Vec<(Pose, Pose)> = [0.3, 1.2, 1.9]
+            .iter()
+            .map(|&d| {
+                let turn = Pose::new(DVec3::new(d, 0.2, 0.0), DQuat::from_rotation_y(0.4 * d));
+                (Pose::IDENTITY, at.compose(&turn).compose(&at.inverse()))
+            })
+            .collect();
+        let (pairs, _) = agree(ctx, &a, &b, &poses, &mut QueryScratch::default(), false);
+        assert!(pairs > 50, "{pairs}");
+    }
+}

@@ -1,0 +1,333 @@
+//! The scheduler against the brute-force exact oracle on generated many-body scenes.
+
+use frcd_geom::{DQuat, DVec3, Pose, TriMesh, shapes};
+use frcd_hybrid::{
+    Backend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, HybridError, Mode, Options,
+    Stage, StageBackend, Via,
+};
+use frcd_obb::oracle;
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use std::sync::Arc;
+
+/// A cuboid with one triangle removed: an open mesh (no solid, no image space).
+fn open_box() -> TriMesh {
+    let c = shapes::cuboid(DVec3::new(0.6, 0.4, 0.3));
+    let idx: Vec<[u32; 3]> = c.indices()[1..].to_vec();
+    TriMesh::new(c.vertices().to_vec(), idx).expect("valid open mesh")
+}
+
+struct GenScene {
+    bodies: Vec<BodySpec>,
+    exclude: Vec<(usize, usize)>,
+    frames: Vec<Vec<Pose>>,
+}
+
+/// `n` bodies of four kinds in a box sized so that a fair share of pairs overlap, moving
+/// coherently for `frames` frames; body 0 is a static big sphere that holds a small sphere
+/// (body 1, static too but excluded from nothing) in frame 0; one pair is excluded.
+fn scene(seed: u64, n: usize, frames: usize, with_open: bool) -> GenScene {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let sphere = Arc::new(shapes::icosphere(1.0, 2));
+    let small = Arc::new(shapes::icosphere(0.2, 1));
+    let cube = Arc::new(shapes::cuboid(DVec3::new(0.7, 0.5, 0.4)));
+    let torus = Arc::new(shapes::torus(0.8, 0.25, 16, 8).expect("torus"));
+    let open = Arc::new(open_box());
+    let mut bodies = vec![
+        BodySpec {
+            name: "big".into(),
+            mesh: sphere.clone(),
+            is_static: true,
+        },
+        BodySpec {
+            name: "inner".into(),
+            mesh: small,
+            is_static: false,
+        },
+    ];
+    for i in 2..n {
+        let mesh = match i % 4 {
+            0 => sphere.clone(),
+            1 => cube.clone(),
+            2 => torus.clone(),
+            _ if with_open => open.clone(),
+            _ => cube.clone(),
+        };
+        bodies.push(BodySpec {
+            name: format!("body{i}"),
+            mesh,
+            is_static: i % 7 == 0,
+        });
+    }
+    let side = (n as f64).cbrt() * 1.6;
+    let mut pos: Vec<DVec3> = (0..n)
+        .map(|_| DVec3::new(rng.random(), rng.random(), rng.random()) * side)
+        .collect();
+    pos[0] = DVec3::splat(side / 2.0);
+    pos[1] = pos[0] + DVec3::new(0.1, 0.0, 0.0);
+    let axes: Vec<DVec3> = (0..n)
+        .map(|_| {
+            DVec3::new(rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5, rng.random::<f64>() + 0.1)
+                .normalize()
+        })
+        .collect();
+    let vel: Vec<DVec3> = (0..n)
+        .map(|_| DVec3::new(rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5) * 0.15)
+        .collect();
+    let mut out = Vec::new();
+    for f in 0..frames {
+        let poses = (0..n)
+            .map(|i| {
+                if bodies[i].is_static {
+                    Pose::from_translation(pos[i])
+                } else {
+                    let t = pos[i] + vel[i] * f as f64 * if i == 1 { 8.0 } else { 1.0 };
+                    Pose::new(t, DQuat::from_axis_angle(axes[i], 0.3 * f as f64 + i as f64))
+                }
+            })
+            .collect();
+        out.push(poses);
+    }
+    pos.clear();
+    GenScene {
+        bodies,
+        exclude: vec![(2, 3)],
+        frames: out,
+    }
+}
+
+/// The oracle's interfering pairs `(a, b, pairs, contained)` of one frame.
+type Truth = Vec<(usize, usize, Vec<(u32, u32)>, bool)>;
+
+fn truth(s: &GenScene, poses: &[Pose]) -> Truth {
+    let mut out = Vec::new();
+    for a in 0..s.bodies.len() {
+        for b in a + 1..s.bodies.len() {
+            if (s.bodies[a].is_static && s.bodies[b].is_static) || s.exclude.contains(&(a, b)) {
+                continue;
+            }
+            let ans = oracle::answer(&s.bodies[a].mesh, &poses[a], &s.bodies[b].mesh, &poses[b], true);
+            if ans.collide() {
+                out.push((a, b, ans.pairs, ans.contained.is_some()));
+            }
+        }
+    }
+    out
+}
+
+fn run(s: &GenScene, options: Options) -> Result<(Vec<Truth>, Vec<Truth>, Checker), HybridError> {
+    let checker = Checker::new(s.bodies.clone(), &s.exclude, options)?;
+    let mut state = FrameState::default();
+    let mut got = Vec::new();
+    let mut want = Vec::new();
+    for poses in &s.frames {
+        let r = checker.check(poses, &mut state)?;
+        got.push(
+            r.contacts
+                .iter()
+                .map(|c| (c.a, c.b, c.pairs.clone(), c.contained.is_some()))
+                .collect(),
+        );
+        want.push(truth(s, poses));
+    }
+    Ok((want, got, checker))
+}
+
+fn gpu_required() -> bool {
+    std::env::var("FRCD_REQUIRE_GPU").is_ok_and(|v| v == "1")
+}
+
+#[test]
+fn exact_cpu_equals_oracle() {
+    for (seed, with_open) in [(1, false), (2, true), (3, true)] {
+        let s = scene(seed, 24, 6, with_open);
+        let options = Options {
+            backend: Backend::Cpu,
+            ..Options::default()
+        };
+        let (want, got, _) = run(&s, options).expect("cpu never fails");
+        let hits: usize = want.iter().map(Vec::len).sum();
+        assert!(hits > 10, "scene {seed} has too few interferences ({hits}) to test much");
+        assert!(want[0].iter().any(|t| t.0 == 0 && t.1 == 1 && t.3), "containment case present");
+        assert_eq!(want, got, "seed {seed}");
+    }
+}
+
+#[test]
+fn exact_hybrid_default_equals_oracle_and_reuses_unchanged_pairs() {
+    let s = scene(4, 30, 5, true);
+    let (want, got, checker) = run(&s, Options::default()).unwrap();
+    assert_eq!(want, got);
+    // Same poses twice: every pair answered from last frame, same answer.
+    let mut state = FrameState::default();
+    let first = checker.check(&s.frames[0], &mut state).unwrap();
+    let again = checker.check(&s.frames[0], &mut state).unwrap();
+    assert_eq!(again.reused, again.rcs);
+    assert!(again.contacts.iter().all(|c| c.via == Via::Reused));
+    let strip = |r: &frcd_hybrid::FrameResult| {
+        r.contacts
+            .iter()
+            .map(|c| (c.a, c.b, c.pairs.clone(), c.contained))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(strip(&first), strip(&again));
+}
+
+#[test]
+fn segments_match_pairs() {
+    let s = scene(5, 12, 2, false);
+    let checker = Checker::new(
+        s.bodies.clone(),
+        &s.exclude,
+        Options {
+            segments: true,
+            ..Options::default()
+        },
+    )
+    .unwrap();
+    let r = checker.check(&s.frames[1], &mut FrameState::default()).unwrap();
+    assert!(!r.contacts.is_empty());
+    for c in &r.contacts {
+        assert_eq!(c.segments.len(), c.pairs.len());
+        assert!(c.segments.iter().all(Option::is_some));
+    }
+}
+
+#[test]
+fn nothing_runs_without_box_overlap() {
+    let ball = Arc::new(shapes::icosphere(1.0, 1));
+    let bodies: Vec<BodySpec> = (0..5)
+        .map(|i| BodySpec {
+            name: format!("b{i}"),
+            mesh: ball.clone(),
+            is_static: false,
+        })
+        .collect();
+    let poses: Vec<Pose> = (0..5)
+        .map(|i| Pose::from_translation(DVec3::new(3.0 * i as f64, 0.0, 0.0)))
+        .collect();
+    let checker = Checker::new(bodies, &[], Options::default()).unwrap();
+    assert!(!checker.has_gpgpu() && !checker.has_image(), "a 5-body scene needs no GPU");
+    let r = checker.check(&poses, &mut FrameState::default()).unwrap();
+    assert_eq!(r.rcs, 0);
+    assert!(r.contacts.is_empty());
+    assert_eq!(r.stages[0].backend, StageBackend::Cpu);
+    assert_eq!(r.stages[1].stage, Stage::Image);
+    assert_eq!(r.stages[1].backend, StageBackend::Skipped);
+    assert_eq!(r.stages[2].backend, StageBackend::Skipped);
+}
+
+#[test]
+fn bad_input_is_a_typed_error() {
+    let s = scene(6, 6, 1, false);
+    assert!(matches!(
+        Checker::new(s.bodies.clone(), &[(0, 9)], Options::default()),
+        Err(HybridError::BadExclusion { b: 9, .. })
+    ));
+    let fast_image_exact = Options {
+        backend: Backend::Image,
+        mode: Mode::Exact,
+        ..Options::default()
+    };
+    let e = Checker::new(s.bodies.clone(), &[], fast_image_exact).unwrap_err();
+    assert!(
+        matches!(e, HybridError::ImageNeedsFast | HybridError::FeatureDisabled { .. }),
+        "{e}"
+    );
+    let checker = Checker::new(s.bodies.clone(), &[], Options::default()).unwrap();
+    let mut st = FrameState::default();
+    assert!(matches!(
+        checker.check(&s.frames[0][..3], &mut st),
+        Err(HybridError::PoseCount { expected: 6, got: 3 })
+    ));
+    let mut poses = s.frames[0].clone();
+    poses[4].translation.y = f64::NAN;
+    let e = checker.check(&poses, &mut st).unwrap_err();
+    assert!(e.to_string().contains("body4"), "{e}");
+}
+
+/// GPU backends on the software adapter; SKIP without an adapter unless FRCD_REQUIRE_GPU=1.
+#[cfg(feature = "gpgpu")]
+#[test]
+fn exact_gpgpu_and_gpu_heavy_hybrid_equal_oracle() {
+    let s = scene(7, 20, 3, true);
+    let forced = Options {
+        backend: Backend::Gpgpu,
+        gpu: GpuPolicy::Require,
+        ..Options::default()
+    };
+    let (want, got, checker) = match run(&s, forced) {
+        Err(HybridError::Gpu { message, .. }) if !gpu_required() => {
+            println!("SKIP exact_gpgpu: no GPU adapter ({message})");
+            return;
+        }
+        other => other.expect("gpgpu backend"),
+    };
+    assert!(checker.has_gpgpu());
+    assert_eq!(want, got);
+    // A cost model in which the GPU is free: hybrid puts broad and narrow phase on it.
+    let cheap_gpu = CostModel {
+        gpu_broad_us: Some(0.0),
+        gpu_broad_ns_per_pair: Some(0.0),
+        gpu_narrow_us: Some(0.0),
+        gpu_narrow_ns_per_triangle: Some(0.0),
+        ..CostModel::default()
+    };
+    let options = Options {
+        cost: cheap_gpu,
+        gpu: GpuPolicy::Require,
+        ..Options::default()
+    };
+    let checker = Checker::new(s.bodies.clone(), &s.exclude, options).unwrap();
+    let mut st = FrameState::default();
+    for poses in &s.frames {
+        let r = checker.check(poses, &mut st).unwrap();
+        assert_eq!(r.stages[0].backend, StageBackend::Gpu);
+        assert!(r.contacts.iter().all(|c| c.via == Via::Gpu));
+        let got: Truth = r
+            .contacts
+            .iter()
+            .map(|c| (c.a, c.b, c.pairs.clone(), c.contained.is_some()))
+            .collect();
+        assert_eq!(got, truth(&s, poses));
+    }
+}
+
+/// Fast mode: everything reported is true; deep interference is found.
+#[cfg(feature = "image")]
+#[test]
+fn fast_mode_reports_only_true_interference() {
+    let s = scene(8, 16, 3, true);
+    let options = Options {
+        mode: Mode::Fast,
+        backend: Backend::Image,
+        gpu: GpuPolicy::Require,
+        ..Options::default()
+    };
+    let (want, got, checker) = match run(&s, options) {
+        Err(HybridError::Gpu { message, .. }) if !gpu_required() => {
+            println!("SKIP fast_mode: no GPU adapter ({message})");
+            return;
+        }
+        other => other.expect("image backend"),
+    };
+    assert!(checker.has_image());
+    let mut found = 0;
+    for (w, g) in want.iter().zip(&got) {
+        for (a, b, pairs, contained) in g {
+            let t = w
+                .iter()
+                .find(|t| t.0 == *a && t.1 == *b)
+                .unwrap_or_else(|| panic!("fast mode reported ({a}, {b}) which does not interfere"));
+            assert!(pairs.iter().all(|p| t.2.binary_search(p).is_ok()));
+            if *contained {
+                assert!(t.3);
+            }
+            found += 1;
+        }
+    }
+    let total: usize = want.iter().map(Vec::len).sum();
+    assert!(found * 2 >= total, "fast mode found only {found} of {total}");
+    // The deep containment case (small sphere inside the big one) is found in frame 0.
+    assert!(got[0].iter().any(|t| t.0 == 0 && t.1 == 1));
+}

@@ -1,0 +1,174 @@
+use crate::ImageError;
+
+/// A wgpu device and queue the detector runs on, with what it was checked for.
+///
+/// Engines that already own a device pass it in with [`GpuContext::from_device`]; tools and tests
+/// use [`GpuContext::headless`], which picks an adapter (a real GPU, or Mesa's software Vulkan
+/// driver lavapipe on a machine without one) and requests a device with exactly the
+/// [`GpuContext::required_features`] and limits read from the adapter.
+///
+/// ```no_run
+/// let ctx = frcd_image::GpuContext::headless()?;
+/// println!("running on {}", ctx.adapter_name());
+/// # Ok::<(), frcd_image::ImageError>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct GpuContext {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    adapter: Option<wgpu::AdapterInfo>,
+}
+
+/// Smallest `max_texture_dimension_2d` the detector accepts (a 64-pixel image must fit).
+const MIN_TEXTURE_DIMENSION: u32 = 64;
+/// Storage buffers the resolve pass binds (lengths, mask, counters).
+const STORAGE_BUFFERS_PER_STAGE: u32 = 3;
+
+impl GpuContext {
+    /// Features the detector needs: `DEPTH32FLOAT_STENCIL8`. Depth peeling compares a fragment's
+    /// depth with the previous layer's stored depth, which is exact only with a float depth buffer
+    /// (a 24-bit unorm one rounds and would peel a layer twice).
+    pub fn required_features() -> wgpu::Features {
+        wgpu::Features::DEPTH32FLOAT_STENCIL8
+    }
+
+    /// The limits requested from an adapter with `adapter_limits`: WebGPU's downlevel defaults, with
+    /// the texture and buffer sizes raised to what the adapter offers (they bound the resolution).
+    pub fn required_limits(adapter_limits: &wgpu::Limits) -> wgpu::Limits {
+        wgpu::Limits {
+            max_texture_dimension_2d: adapter_limits.max_texture_dimension_2d,
+            max_storage_buffer_binding_size: adapter_limits.max_storage_buffer_binding_size,
+            max_buffer_size: adapter_limits.max_buffer_size,
+            ..wgpu::Limits::downlevel_defaults()
+        }
+    }
+
+    /// Wraps a device and queue the caller owns, after checking features and limits.
+    pub fn from_device(device: wgpu::Device, queue: wgpu::Queue) -> Result<Self, ImageError> {
+        Self::check(&device)?;
+        Ok(Self {
+            device,
+            queue,
+            adapter: None,
+        })
+    }
+
+    /// A device on the default adapter, honouring `WGPU_BACKEND`, `WGPU_ADAPTER_NAME` and the other
+    /// wgpu environment variables. No adapter is [`ImageError::NoAdapter`].
+    pub fn headless() -> Result<Self, ImageError> {
+        let desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        Self::headless_with(desc)
+    }
+
+    /// A device on the first adapter the instance described by `desc` offers (e.g. with
+    /// `backends` restricted to `wgpu::Backends::VULKAN`).
+    pub fn headless_with(desc: wgpu::InstanceDescriptor) -> Result<Self, ImageError> {
+        let instance = wgpu::Instance::new(desc);
+        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            force_fallback_adapter: false,
+            compatible_surface: None,
+            ..Default::default()
+        }))
+        .map_err(|e| ImageError::NoAdapter(e.to_string()))?;
+        let info = adapter.get_info();
+        let missing = Self::required_features() - adapter.features();
+        if !missing.is_empty() {
+            return Err(ImageError::MissingFeatures { missing });
+        }
+        if !adapter
+            .get_downlevel_capabilities()
+            .flags
+            .contains(wgpu::DownlevelFlags::COMPUTE_SHADERS)
+        {
+            return Err(ImageError::DeviceRequest {
+                adapter: info.name.clone(),
+                reason: "adapter has no compute shaders".into(),
+            });
+        }
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("frcd-image"),
+            required_features: Self::required_features(),
+            required_limits: Self::required_limits(&adapter.limits()),
+            ..Default::default()
+        }))
+        .map_err(|e| ImageError::DeviceRequest {
+            adapter: info.name.clone(),
+            reason: e.to_string(),
+        })?;
+        Self::check(&device)?;
+        log::info!(
+            "frcd-image: adapter '{}' ({:?}, {:?})",
+            info.name,
+            info.device_type,
+            info.backend
+        );
+        Ok(Self {
+            device,
+            queue,
+            adapter: Some(info),
+        })
+    }
+
+    fn check(device: &wgpu::Device) -> Result<(), ImageError> {
+        let missing = Self::required_features() - device.features();
+        if !missing.is_empty() {
+            return Err(ImageError::MissingFeatures { missing });
+        }
+        let l = device.limits();
+        let checks: [(&'static str, u64, u64); 3] = [
+            (
+                "max_texture_dimension_2d",
+                l.max_texture_dimension_2d as u64,
+                MIN_TEXTURE_DIMENSION as u64,
+            ),
+            (
+                "max_storage_buffers_per_shader_stage",
+                l.max_storage_buffers_per_shader_stage as u64,
+                STORAGE_BUFFERS_PER_STAGE as u64,
+            ),
+            (
+                "max_compute_invocations_per_workgroup",
+                l.max_compute_invocations_per_workgroup as u64,
+                64,
+            ),
+        ];
+        for (name, have, need) in checks {
+            if have < need {
+                return Err(ImageError::LimitTooLow { name, have, need });
+            }
+        }
+        Ok(())
+    }
+
+    /// The device.
+    pub fn device(&self) -> &wgpu::Device {
+        &self.device
+    }
+
+    /// The queue.
+    pub fn queue(&self) -> &wgpu::Queue {
+        &self.queue
+    }
+
+    /// The adapter description when this context created the device ([`GpuContext::headless`]).
+    pub fn adapter_info(&self) -> Option<&wgpu::AdapterInfo> {
+        self.adapter.as_ref()
+    }
+
+    /// A short adapter name for reports ("caller's device" when the caller supplied it).
+    pub fn adapter_name(&self) -> String {
+        match &self.adapter {
+            Some(i) => format!("{} ({:?}, {:?})", i.name, i.device_type, i.backend),
+            None => "caller's device".into(),
+        }
+    }
+
+    /// True when the adapter is a software rasterizer (device type `Cpu`, e.g. lavapipe).
+    pub fn is_software(&self) -> bool {
+        matches!(
+            self.adapter.as_ref().map(|i| i.device_type),
+            Some(wgpu::DeviceType::Cpu)
+        )
+    }
+}

@@ -1,0 +1,170 @@
+use frcd_geom::MeshError;
+use std::fmt;
+use std::path::PathBuf;
+
+/// Where in a file a problem is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Location {
+    /// A 1-based line of a text file.
+    Line(usize),
+    /// A 1-based line and column of a text file.
+    LineColumn(usize, usize),
+    /// A 0-based triangle record of a binary STL file.
+    Record(usize),
+    /// The end of the file (something was missing).
+    EndOfFile,
+    /// The whole file (e.g. a binary header or size problem).
+    File,
+}
+
+impl Location {
+    /// The 1-based line, when the location is a line.
+    pub fn line(&self) -> Option<usize> {
+        match *self {
+            Location::Line(l) | Location::LineColumn(l, _) => Some(l),
+            _ => None,
+        }
+    }
+}
+
+impl fmt::Display for Location {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Location::Line(l) => write!(f, "line {l}"),
+            Location::LineColumn(l, c) => write!(f, "line {l}, column {c}"),
+            Location::Record(r) => write!(f, "triangle record {r}"),
+            Location::EndOfFile => f.write_str("end of file"),
+            Location::File => f.write_str("file"),
+        }
+    }
+}
+
+/// Everything that can go wrong reading or writing frcd files. Every variant names the file.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// The file could not be read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The operating-system error.
+        source: std::io::Error,
+    },
+    /// The file's content does not follow its format.
+    #[error("{}: {location}: {msg}", path.display())]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// Where in the file.
+        location: Location,
+        /// What is wrong.
+        msg: String,
+    },
+    /// The file parsed, but frcd-geom refused the mesh (empty, non-finite, too large).
+    #[error("{}{}: invalid mesh: {source}", path.display(), object.as_ref().map(|o| format!(" (object '{o}')")).unwrap_or_default())]
+    Mesh {
+        /// The file.
+        path: PathBuf,
+        /// The OBJ object, when the file was split into objects.
+        object: Option<String>,
+        /// Why the mesh was refused.
+        source: MeshError,
+    },
+    /// The file extension names no format frcd reads.
+    #[error("{}: unsupported mesh format (expected .stl or .obj)", path.display())]
+    UnsupportedFormat {
+        /// The file.
+        path: PathBuf,
+    },
+    /// Two bodies of a scene have the same name.
+    #[error("{}: body name '{name}' is used twice", path.display())]
+    DuplicateBody {
+        /// The scene file.
+        path: PathBuf,
+        /// The repeated name.
+        name: String,
+    },
+    /// A frame, exclusion or trajectory row names a body the scene does not have.
+    #[error("{}: {place}: unknown body '{name}'", path.display())]
+    UnknownBody {
+        /// The scene or trajectory file.
+        path: PathBuf,
+        /// The unknown name.
+        name: String,
+        /// Where it was named ("frame 12", "exclude pair 3", "line 40").
+        place: String,
+    },
+    /// A pose is not finite or its quaternion is not of unit length.
+    #[error("{}: {place}: bad pose: {msg}", path.display())]
+    BadPose {
+        /// The scene or trajectory file.
+        path: PathBuf,
+        /// Where ("body 'rail'", "frame 12, body 'wheelset_1'", "line 40").
+        place: String,
+        /// What is wrong.
+        msg: String,
+    },
+    /// A body declared static is given a pose in a frame.
+    #[error("{}: {place}: body '{name}' is static but is given a pose", path.display())]
+    StaticBodyMoves {
+        /// The scene or trajectory file.
+        path: PathBuf,
+        /// The body.
+        name: String,
+        /// Where ("frame 12", "line 40").
+        place: String,
+    },
+    /// Anything else a scene, trajectory or report file gets wrong (said in the message).
+    #[error("{}: {msg}", path.display())]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong and where.
+        msg: String,
+    },
+}
+
+impl Error {
+    /// The file the error is about.
+    pub fn path(&self) -> &std::path::Path {
+        match self {
+            Error::Io { path, .. }
+            | Error::Parse { path, .. }
+            | Error::Mesh { path, .. }
+            | Error::UnsupportedFormat { path }
+            | Error::DuplicateBody { path, .. }
+            | Error::UnknownBody { path, .. }
+            | Error::BadPose { path, .. }
+            | Error::StaticBodyMoves { path, .. }
+            | Error::Invalid { path, .. } => path,
+        }
+    }
+
+    /// The location inside the file, for parse errors.
+    pub fn location(&self) -> Option<Location> {
+        match self {
+            Error::Parse { location, .. } => Some(*location),
+            _ => None,
+        }
+    }
+
+    pub(crate) fn io(path: &std::path::Path, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+
+    pub(crate) fn parse(
+        path: &std::path::Path,
+        location: Location,
+        msg: impl Into<String>,
+    ) -> Self {
+        Error::Parse {
+            path: path.to_path_buf(),
+            location,
+            msg: msg.into(),
+        }
+    }
+}

@@ -1,0 +1,681 @@
+//! Pair queries between two OBB trees: boolean first contact or every touching triangle pair,
+//! with the hybrid top volume, optional solid-mode containment and a caller-owned coherence
+//! cache.
+
+use crate::sat::{self, Placed, SLACK_REL};
+use crate::solid::point_inside;
+use crate::tree::ObbTree;
+use frcd_geom::{Aabb, DMat3, DVec3, Pose, Triangle};
+use frcd_tritri::{Contact, Method};
+
+/// What a pair query looks for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub enum Mode {
+    /// Stop at the first touching triangle pair (boolean answer plus one witness pair).
+    #[default]
+    FirstContact,
+    /// Every touching triangle pair.
+    AllPairs,
+}
+
+/// Which bounding volumes are tested before the root OBB pair.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub enum TopVolume {
+    /// Bounding spheres, then the bodies' axis-aligned boxes, then the root OBBs (cheapest first).
+    #[default]
+    Hybrid,
+    /// The root OBB pair only.
+    RootObb,
+}
+
+/// Options of a pair query.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct Request {
+    /// First contact or all pairs.
+    pub mode: Mode,
+    /// Also compute the intersection segment of every reported pair.
+    pub segments: bool,
+    /// Triangle-triangle test. Only [`Method::Exact`] makes the answer equal the oracle's.
+    pub method: Method,
+    /// Treat closed meshes as solids: when no surface pair touches, report one mesh lying inside
+    /// the other (a point-in-mesh parity test on exact predicates). A mesh that is not closed
+    /// cannot contain anything.
+    pub solid: bool,
+    /// Bounding volumes tested before the root OBB pair.
+    pub top_volume: TopVolume,
+}
+
+/// Which body lies inside which (solid mode, no touching surface pair).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub enum Containment {
+    /// A connected component of B lies inside A.
+    BInsideA,
+    /// A connected component of A lies inside B.
+    AInsideB,
+}
+
+/// Work counters of a query, for benchmarking.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct Counters {
+    /// Sphere and AABB tests of the hybrid top volume.
+    pub top_tests: u64,
+    /// OBB-OBB separating-axis tests.
+    pub box_tests: u64,
+    /// Triangle-triangle tests (after the exact per-pair box check).
+    pub tri_tests: u64,
+}
+
+impl core::ops::AddAssign for Counters {
+    fn add_assign(&mut self, o: Counters) {
+        self.top_tests += o.top_tests;
+        self.box_tests += o.box_tests;
+        self.tri_tests += o.tri_tests;
+    }
+}
+
+/// The answer of a pair query.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Collision {
+    /// True when the bodies interfere: a surface pair touches, or (solid mode) one lies inside
+    /// the other.
+    pub collide: bool,
+    /// [`Mode::AllPairs`]: every touching pair `(tri_a, tri_b)` (input-mesh indices), sorted
+    /// ascending. Empty in [`Mode::FirstContact`], whose answer is `collide` and `witness`.
+    pub pairs: Vec<(u32, u32)>,
+    /// A touching pair, when there is one ([`Mode::FirstContact`]: the first one found, which
+    /// may depend on the cache; [`Mode::AllPairs`]: the first of `pairs`).
+    pub witness: Option<(u32, u32)>,
+    /// With [`Request::segments`]: the contact (point, segment, or coplanar overlap polygon) of
+    /// each pair of `pairs` (AllPairs) or of the witness (FirstContact), in A's frame, in the
+    /// same order ([`frcd_tritri::intersection_segment`]; `None` only where a non-exact
+    /// `method` reported a pair the exact test rejects).
+    pub segments: Vec<Option<Contact>>,
+    /// Solid mode: which body lies inside the other, when no surface pair touches.
+    pub contained: Option<Containment>,
+    /// Work done.
+    pub counters: Counters,
+}
+
+/// How B's geometry is mapped into A's frame: `p_a = m * p_b + t` with
+/// `m = rel.rotation_matrix()`, `t = rel.translation`, `rel = pose_b.relative_to(pose_a)`.
+///
+/// Every CPU path (the OBB traversal and [`crate::oracle`]) maps triangles with exactly these
+/// operations, so the exact triangle test sees the same f64 coordinates in both.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RelativeFrame {
+    /// Rotation from B's frame to A's.
+    pub m: DMat3,
+    /// B's origin in A's frame.
+    pub t: DVec3,
+}
+
+impl RelativeFrame {
+    /// The frame mapping B-local points to A-local points.
+    pub fn new(pose_a: &Pose, pose_b: &Pose) -> Self {
+        let rel = pose_b.relative_to(pose_a);
+        Self {
+            m: rel.rotation_matrix(),
+            t: rel.translation,
+        }
+    }
+
+    /// Maps a B-local point into A's frame.
+    #[inline(always)]
+    pub fn point(&self, p: DVec3) -> DVec3 {
+        self.m * p + self.t
+    }
+
+    /// Maps a B-local triangle into A's frame.
+    #[inline(always)]
+    pub fn triangle(&self, t: &Triangle) -> Triangle {
+        Triangle::new(self.point(t.v[0]), self.point(t.v[1]), self.point(t.v[2]))
+    }
+
+    /// A box holding the images of every point of a B-local box, grown by `slack`.
+    pub fn aabb(&self, b: &Aabb, slack: f64) -> Aabb {
+        let c = self.point(b.center());
+        let m = self.m;
+        let abs = DMat3::from_cols(m.x_axis.abs(), m.y_axis.abs(), m.z_axis.abs());
+        let e = abs * b.half_extents() + DVec3::splat(slack);
+        Aabb::new(c - e, c + e)
+    }
+}
+
+/// Separation margin of a query: see the `sat` module's error bound.
+pub(crate) fn query_slack(a: &ObbTree, b: &ObbTree, frame: &RelativeFrame) -> f64 {
+    SLACK_REL * (a.radius_from_origin + b.radius_from_origin + frame.t.length())
+}
+
+/// One entry of a traversal front: a node pair where last query's recursion stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct FrontEntry {
+    a: u32,
+    b: u32,
+    /// Separating axis that culled the pair (`NONE` when the boxes overlapped: a leaf pair).
+    axis: u8,
+}
+
+const NONE: u8 = u8::MAX;
+
+/// Caller-owned frame-to-frame state for [`collide_cached`] on one pair of trees.
+///
+/// Holds the last witness triangle pair (tested first in [`Mode::FirstContact`]), the axis that
+/// last separated the root pair (tried first), and the traversal front of the last
+/// [`Mode::AllPairs`] query (generalized front tracking: the next query starts from these node
+/// pairs, descends where they overlap and pulls separated siblings up to their parent). The
+/// answers are the same as without a cache; only the work differs. A cache used with other
+/// trees resets itself.
+#[derive(Clone, Debug, Default)]
+pub struct PairCache {
+    key: (u64, u64),
+    witness: Option<(u32, u32)>,
+    root_axis: Option<u8>,
+    front: Vec<FrontEntry>,
+    scratch: Vec<FrontEntry>,
+    queries: u64,
+}
+
+impl PairCache {
+    /// An empty cache.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Forgets everything (e.g. after a teleport).
+    pub fn clear(&mut self) {
+        *self = Self::default();
+    }
+
+    /// Number of node pairs in the stored traversal front.
+    pub fn front_len(&self) -> usize {
+        self.front.len()
+    }
+
+    fn bind(&mut self, a: &ObbTree, b: &ObbTree) {
+        let key = (a.uid, b.uid);
+        if key != self.key {
+            self.clear();
+            self.key = key;
+        }
+    }
+}
+
+struct Ctx<'a> {
+    a: &'a ObbTree,
+    b: &'a ObbTree,
+    frame: RelativeFrame,
+    slack: f64,
+    method: Method,
+    counters: Counters,
+}
+
+impl<'a> Ctx<'a> {
+    fn new(a: &'a ObbTree, pose_a: &Pose, b: &'a ObbTree, pose_b: &Pose, method: Method) -> Self {
+        let frame = RelativeFrame::new(pose_a, pose_b);
+        Ctx {
+            a,
+            b,
+            slack: query_slack(a, b, &frame),
+            frame,
+            method,
+            counters: Counters::default(),
+        }
+    }
+
+    /// Hybrid top volume: sphere, then AABB. True when the bodies are certainly apart.
+    fn top_rejects(&mut self, top: TopVolume) -> bool {
+        if top == TopVolume::RootObb {
+            return false;
+        }
+        self.counters.top_tests += 1;
+        let sa = self.a.sphere;
+        let sb = self.b.sphere;
+        let d = self.frame.point(sb.center).distance(sa.center);
+        if d > sa.radius + sb.radius + self.slack {
+            return true;
+        }
+        self.counters.top_tests += 1;
+        let bb = self.frame.aabb(&self.b.aabb, self.slack);
+        !bb.intersects(&self.a.aabb.inflated(self.slack))
+    }
+
+    #[inline]
+    fn place(&self, j: u32) -> Placed {
+        Placed::new(&self.b.nodes[j as usize].obb, &self.frame.m, self.frame.t)
+    }
+
+    #[inline]
+    fn separating(&mut self, i: u32, j: u32, first: Option<u8>) -> Option<u8> {
+        let pb = self.place(j);
+        self.separating_placed(i, &pb, first)
+    }
+
+    #[inline]
+    fn separating_placed(&mut self, i: u32, pb: &Placed, first: Option<u8>) -> Option<u8> {
+        self.counters.box_tests += 1;
+        sat::separating_axis(&self.a.nodes[i as usize].obb, pb, self.slack, first)
+    }
+
+    #[inline]
+    fn disjoint_placed(&mut self, i: u32, pb: &Placed) -> bool {
+        self.counters.box_tests += 1;
+        sat::disjoint(&self.a.nodes[i as usize].obb, pb, self.slack)
+    }
+
+    /// The two children of a node pair in the traversal tree (descend into the bigger box; a
+    /// rule that depends on the trees only, so the traversal tree is the same every query).
+    #[inline]
+    fn children(&self, i: u32, j: u32) -> [(u32, u32); 2] {
+        let na = &self.a.nodes[i as usize];
+        let nb = &self.b.nodes[j as usize];
+        let split_a = if nb.is_leaf() {
+            true
+        } else if na.is_leaf() {
+            false
+        } else {
+            na.obb.half_extents.length_squared() >= nb.obb.half_extents.length_squared()
+        };
+        if split_a {
+            [(i + 1, j), (na.right, j)]
+        } else {
+            [(i, j + 1), (i, nb.right)]
+        }
+    }
+
+    #[inline]
+    fn both_leaves(&self, i: u32, j: u32) -> bool {
+        self.a.nodes[i as usize].is_leaf() && self.b.nodes[j as usize].is_leaf()
+    }
+
+    /// Exact per-pair box check, then the triangle test.
+    #[inline]
+    fn tri_pair(&mut self, ta: u32, tb: u32) -> bool {
+        let t1 = &self.a.triangles[ta as usize];
+        let t2 = self.frame.triangle(&self.b.triangles[tb as usize]);
+        if !t1.aabb().intersects(&t2.aabb()) {
+            return false;
+        }
+        self.counters.tri_tests += 1;
+        frcd_tritri::intersects(self.method, t1, &t2)
+    }
+
+    /// Tests the triangles of a leaf pair; calls `hit` on each touching pair, stops when it
+    /// returns `true`.
+    #[inline]
+    fn leaf_pair(&mut self, i: u32, j: u32, hit: &mut impl FnMut(u32, u32) -> bool) -> bool {
+        let na = self.a.nodes[i as usize];
+        let nb = self.b.nodes[j as usize];
+        for x in na.first..na.first + na.count {
+            let ta = self.a.order[x as usize];
+            for y in nb.first..nb.first + nb.count {
+                let tb = self.b.order[y as usize];
+                if self.tri_pair(ta, tb) && hit(ta, tb) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
+    /// Depth-first traversal below (and including) node pair `(i, j)`. Appends the pairs where
+    /// it stopped to `front` (when given); calls `hit` on touching triangle pairs and stops
+    /// everything when `hit` returns `true` (then returns `true`).
+    fn descend(
+        &mut self,
+        i: u32,
+        j: u32,
+        first_axis: u8,
+        stack: &mut Vec<(u32, u32, Placed)>,
+        mut front: Option<&mut Vec<FrontEntry>>,
+        hit: &mut impl FnMut(u32, u32) -> bool,
+    ) -> bool {
+        let base = stack.len();
+        // B's boxes travel with the stack mapped into A's frame: splitting A reuses them.
+        stack.push((i, j, self.place(j)));
+        let mut first = (first_axis != NONE).then_some(first_axis);
+        while stack.len() > base {
+            let (i, j, pj) = stack.pop().expect("non-empty");
+            let sep = if let Some(f) = &mut front {
+                let axis = self.separating_placed(i, &pj, first.take());
+                if let Some(axis) = axis {
+                    f.push(FrontEntry { a: i, b: j, axis });
+                    continue;
+                }
+                false
+            } else {
+                self.disjoint_placed(i, &pj)
+            };
+            if sep {
+                continue;
+            }
+            if self.both_leaves(i, j) {
+                if let Some(f) = &mut front {
+                    f.push(FrontEntry {
+                        a: i,
+                        b: j,
+                        axis: NONE,
+                    });
+                }
+                if self.leaf_pair(i, j, hit) {
+                    stack.truncate(base);
+                    return true;
+                }
+                continue;
+            }
+            let [l, r] = self.children(i, j);
+            if l.1 == j {
+                stack.push((r.0, r.1, pj));
+                stack.push((l.0, l.1, pj));
+            } else {
+                stack.push((r.0, r.1, self.place(r.1)));
+                stack.push((l.0, l.1, self.place(l.1)));
+            }
+        }
+        false
+    }
+
+    fn containment(&self, solid: bool) -> Option<Containment> {
+        if !solid {
+            return None;
+        }
+        contained(self.a, self.b, &self.frame, 0x5EED)
+    }
+}
+
+/// Solid-mode containment with everything in A's frame (B's points and triangles mapped by
+/// `frame`), for when no surface pair touches. `seed` picks the ray directions.
+pub(crate) fn contained(
+    a: &ObbTree,
+    b: &ObbTree,
+    frame: &RelativeFrame,
+    seed: u64,
+) -> Option<Containment> {
+    if a.closed {
+        let bounds = a.aabb;
+        let tris = &a.triangles;
+        for &p in &b.component_points {
+            let p = frame.point(p);
+            if point_inside(p, tris.len(), |i| tris[i], &bounds, seed) == Some(true) {
+                return Some(Containment::BInsideA);
+            }
+        }
+    }
+    if b.closed {
+        // Cheap conservative cull first: a point outside B's mapped box is outside B.
+        let rough = frame.aabb(&b.aabb, query_slack(a, b, frame));
+        if !a.component_points.iter().any(|p| rough.contains_point(*p)) {
+            return None;
+        }
+        let tris = &b.triangles;
+        // The bounds must hold the mapped triangles exactly: build them from the mapped triangles.
+        let bounds = tris
+            .iter()
+            .fold(Aabb::EMPTY, |acc, t| acc.union(&frame.triangle(t).aabb()));
+        for &p in &a.component_points {
+            if point_inside(p, tris.len(), |i| frame.triangle(&tris[i]), &bounds, seed)
+                == Some(true)
+            {
+                return Some(Containment::AInsideB);
+            }
+        }
+    }
+    None
+}
+
+fn finish(ctx: &Ctx<'_>, request: &Request, mut c: Collision) -> Collision {
+    if request.mode == Mode::AllPairs {
+        c.pairs.sort_unstable();
+        c.witness = c.pairs.first().copied();
+    }
+    c.collide = c.witness.is_some();
+    if !c.collide {
+        c.contained = ctx.containment(request.solid);
+        c.collide = c.contained.is_some();
+    }
+    if request.segments {
+        let list: Vec<(u32, u32)> = match request.mode {
+            Mode::AllPairs => c.pairs.clone(),
+            Mode::FirstContact => c.witness.into_iter().collect(),
+        };
+        c.segments = list
+            .iter()
+            .map(|&(ta, tb)| {
+                frcd_tritri::intersection_segment(
+                    &ctx.a.triangles[ta as usize],
+                    &ctx.frame.triangle(&ctx.b.triangles[tb as usize]),
+                )
+            })
+            .collect();
+    }
+    c.counters = ctx.counters;
+    c
+}
+
+/// Collides two trees placed at `pose_a` and `pose_b`.
+///
+/// B is tested in A's frame (one relative pose per query, [`RelativeFrame`]); the hybrid top
+/// volume runs first, then a depth-first traversal with the conservative 15-axis test, then the
+/// triangle test of `request.method` on leaf pairs.
+///
+/// ```
+/// use frcd_obb::{collide, BuildOptions, Mode, ObbTree, Request};
+/// use frcd_geom::{shapes, DVec3, Pose};
+/// let tree = ObbTree::build(&shapes::icosphere(1.0, 3), &BuildOptions::default());
+/// let near = Pose::from_translation(DVec3::new(1.5, 0.0, 0.0));
+/// let far = Pose::from_translation(DVec3::new(2.5, 0.0, 0.0));
+/// let all = Request { mode: Mode::AllPairs, ..Request::default() };
+/// let hit = collide(&tree, &Pose::IDENTITY, &tree, &near, &all);
+/// assert!(hit.collide && !hit.pairs.is_empty());
+/// assert!(!collide(&tree, &Pose::IDENTITY, &tree, &far, &Request::default()).collide);
+/// ```
+pub fn collide(
+    a: &ObbTree,
+    pose_a: &Pose,
+    b: &ObbTree,
+    pose_b: &Pose,
+    request: &Request,
+) -> Collision {
+    let mut ctx = Ctx::new(a, pose_a, b, pose_b, request.method);
+    let mut c = Collision::default();
+    if ctx.top_rejects(request.top_volume) {
+        // Disjoint bounding volumes: neither contact nor containment.
+        c.counters = ctx.counters;
+        return c;
+    }
+    let mut stack = Vec::with_capacity(64);
+    match request.mode {
+        Mode::FirstContact => {
+            let mut w = None;
+            ctx.descend(0, 0, NONE, &mut stack, None, &mut |x, y| {
+                w = Some((x, y));
+                true
+            });
+            c.witness = w;
+        }
+        Mode::AllPairs => {
+            let pairs = &mut c.pairs;
+            ctx.descend(0, 0, NONE, &mut stack, None, &mut |x, y| {
+                pairs.push((x, y));
+                false
+            });
+        }
+    }
+    finish(&ctx, request, c)
+}
+
+/// [`collide`] with frame-to-frame coherence: the same answer (`collide`, `pairs`, `contained`;
+/// in FirstContact mode the witness may be a different touching pair), less work when poses
+/// change little between calls. `cache` belongs to this pair of trees (it resets itself when
+/// given other trees).
+pub fn collide_cached(
+    a: &ObbTree,
+    pose_a: &Pose,
+    b: &ObbTree,
+    pose_b: &Pose,
+    request: &Request,
+    cache: &mut PairCache,
+) -> Collision {
+    cache.bind(a, b);
+    let mut ctx = Ctx::new(a, pose_a, b, pose_b, request.method);
+    let mut c = Collision::default();
+    match request.mode {
+        Mode::FirstContact => {
+            if let Some((x, y)) = cache.witness {
+                if ctx.tri_pair(x, y) {
+                    c.witness = Some((x, y));
+                    return finish(&ctx, request, c);
+                }
+                // The contact moved a little: try the triangles around the old witness.
+                let mut found = None;
+                'near: for &x2 in a.neighbours(x) {
+                    for &y2 in b.neighbours(y) {
+                        if ctx.tri_pair(x2, y2) {
+                            found = Some((x2, y2));
+                            break 'near;
+                        }
+                    }
+                }
+                if found.is_some() {
+                    c.witness = found;
+                    cache.witness = found;
+                    return finish(&ctx, request, c);
+                }
+            }
+            if ctx.top_rejects(request.top_volume) {
+                cache.witness = None;
+                c.counters = ctx.counters;
+                return c;
+            }
+            let axis = ctx.separating(0, 0, cache.root_axis);
+            cache.root_axis = axis;
+            if axis.is_none() {
+                let mut w = None;
+                let mut stack = Vec::with_capacity(64);
+                // The root pair overlaps: start from its children.
+                if ctx.both_leaves(0, 0) {
+                    ctx.leaf_pair(0, 0, &mut |x, y| {
+                        w = Some((x, y));
+                        true
+                    });
+                } else {
+                    for (i, j) in ctx.children(0, 0) {
+                        if ctx.descend(i, j, NONE, &mut stack, None, &mut |x, y| {
+                            w = Some((x, y));
+                            true
+                        }) {
+                            break;
+                        }
+                    }
+                }
+                c.witness = w;
+            }
+            cache.witness = c.witness;
+        }
+        Mode::AllPairs => {
+            if ctx.top_rejects(request.top_volume) {
+                c.counters = ctx.counters;
+                return c;
+            }
+            let mut old = std::mem::take(&mut cache.front);
+            if old.is_empty() {
+                old.push(FrontEntry {
+                    a: 0,
+                    b: 0,
+                    axis: cache.root_axis.unwrap_or(NONE),
+                });
+            }
+            let mut new = std::mem::take(&mut cache.scratch);
+            new.clear();
+            let pairs = &mut c.pairs;
+            cache.queries += 1;
+            // Pulling separated siblings up costs a test of their parent, wasted when the parent
+            // still overlaps; try it on every fourth query only.
+            let pull_up = cache.queries % 4 == 1;
+            walk_front(&mut ctx, &old, &mut new, pull_up, &mut |x, y| {
+                pairs.push((x, y));
+                false
+            });
+            cache.root_axis = match new.as_slice() {
+                [e] if e.a == 0 && e.b == 0 && e.axis != NONE => Some(e.axis),
+                _ => None,
+            };
+            cache.front = new;
+            cache.scratch = old;
+        }
+    }
+    finish(&ctx, request, c)
+}
+
+/// Walks the traversal tree from the root down to the old front (a cut of the traversal tree,
+/// in depth-first order) without testing the pairs above it, runs the ordinary traversal from
+/// each front pair, and builds the new front; two separated sibling entries are replaced by
+/// their parent when the parent is separated too. Every leaf pair under the root is reached
+/// exactly once whatever `old` holds, so the answer never depends on the cache.
+fn walk_front(
+    ctx: &mut Ctx<'_>,
+    old: &[FrontEntry],
+    new: &mut Vec<FrontEntry>,
+    pull_up: bool,
+    hit: &mut impl FnMut(u32, u32) -> bool,
+) {
+    enum Step {
+        Visit(u32, u32),
+        Post(u32, u32, usize),
+    }
+    let mut k = 0usize;
+    let mut steps = vec![Step::Visit(0, 0)];
+    let mut stack = Vec::with_capacity(64);
+    while let Some(step) = steps.pop() {
+        match step {
+            Step::Visit(i, j) => {
+                if k < old.len() && old[k].a == i && old[k].b == j {
+                    let axis = old[k].axis;
+                    k += 1;
+                    if axis == NONE && ctx.both_leaves(i, j) {
+                        // A leaf pair whose boxes overlapped last time: test the triangles
+                        // straight away (exact, so the box test is only a filter); classify the
+                        // boxes only when nothing touches, for the pull-up.
+                        let mut any = false;
+                        ctx.leaf_pair(i, j, &mut |x, y| {
+                            any = true;
+                            hit(x, y)
+                        });
+                        let axis = if any {
+                            NONE
+                        } else {
+                            ctx.separating(i, j, None).unwrap_or(NONE)
+                        };
+                        new.push(FrontEntry { a: i, b: j, axis });
+                        continue;
+                    }
+                    ctx.descend(i, j, axis, &mut stack, Some(new), hit);
+                } else if ctx.both_leaves(i, j) {
+                    ctx.descend(i, j, NONE, &mut stack, Some(new), hit);
+                } else {
+                    steps.push(Step::Post(i, j, new.len()));
+                    let [l, r] = ctx.children(i, j);
+                    steps.push(Step::Visit(r.0, r.1));
+                    steps.push(Step::Visit(l.0, l.1));
+                }
+            }
+            Step::Post(i, j, len) => {
+                if pull_up
+                    && new.len() == len + 2
+                    && new[len].axis != NONE
+                    && new[len + 1].axis != NONE
+                {
+                    let first = new[len].axis;
+                    if let Some(axis) = ctx.separating(i, j, Some(first)) {
+                        new.truncate(len);
+                        new.push(FrontEntry { a: i, b: j, axis });
+                    }
+                }
+            }
+        }
+    }
+}

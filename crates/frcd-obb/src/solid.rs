@@ -1,0 +1,142 @@
+//! Point-in-mesh parity on exact orientation predicates, for solid-mode queries.
+
+use frcd_geom::predicates::{collinear3, orient3d};
+use frcd_geom::{Aabb, DVec3, Triangle};
+
+/// Most ray directions tried before giving up on a point whose every ray hits an edge, a vertex
+/// or runs in a face's plane (measure-zero events: in practice the first ray succeeds).
+const MAX_RAYS: u32 = 64;
+
+/// Outcome of one ray against one triangle.
+enum Hit {
+    Miss,
+    Cross,
+    Degenerate,
+}
+
+#[inline]
+fn ray_hit(p: DVec3, q: DVec3, t: &Triangle) -> Hit {
+    let [a, b, c] = t.v;
+    let sp = orient3d(a, b, c, p);
+    let sq = orient3d(a, b, c, q);
+    if sp == sq && sp != 0 {
+        return Hit::Miss;
+    }
+    if sp == 0 && sq == 0 {
+        // The segment lies in the triangle's plane, or the triangle has no area. A zero-area
+        // triangle is a segment or a point, which a generic ray misses.
+        if collinear3(a, b, c) {
+            return Hit::Miss;
+        }
+        return Hit::Degenerate;
+    }
+    let e1 = orient3d(p, q, a, b);
+    let e2 = orient3d(p, q, b, c);
+    let e3 = orient3d(p, q, c, a);
+    let pos = e1 > 0 || e2 > 0 || e3 > 0;
+    let neg = e1 < 0 || e2 < 0 || e3 < 0;
+    if pos && neg {
+        return Hit::Miss;
+    }
+    if e1 == 0 || e2 == 0 || e3 == 0 || sp == 0 || sq == 0 {
+        return Hit::Degenerate;
+    }
+    Hit::Cross
+}
+
+/// A fixed pseudo-random direction sequence (SplitMix64), mostly along one axis so the ray's
+/// box stays narrow; the axis cycles with `k`.
+fn direction(seed: u64, k: u32) -> DVec3 {
+    let mut s = seed ^ (k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    let mut next = || {
+        s = s.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = s;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        (z >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    let (u, v) = (0.2 * next(), 0.2 * next());
+    let sign = if k & 4 == 0 { 1.0 } else { -1.0 };
+    match k % 3 {
+        0 => DVec3::new(sign, u, v),
+        1 => DVec3::new(u, sign, v),
+        _ => DVec3::new(u, v, sign),
+    }
+}
+
+/// Parity of the number of triangles a ray from `p` crosses: `Some(true)` when `p` is inside the
+/// closed mesh whose `n` triangles `tri(i)` returns, `None` when every tried ray was degenerate.
+/// `bounds` must hold every triangle. `p` must not lie on the surface (callers test this first:
+/// the surface pair test would have reported it).
+pub(crate) fn point_inside(
+    p: DVec3,
+    n: usize,
+    tri: impl Fn(usize) -> Triangle,
+    bounds: &Aabb,
+    seed: u64,
+) -> Option<bool> {
+    if !bounds.contains_point(p) {
+        return Some(false);
+    }
+    // Far enough that q is outside the bounds whatever the direction (|dir| >= 1 per axis-major).
+    let reach = 2.0 * (bounds.max - bounds.min).length() + 1.0;
+    'rays: for k in 0..MAX_RAYS {
+        let q = p + direction(seed, k) * reach;
+        let seg = Aabb::new(p.min(q), p.max(q));
+        let mut crossings = 0u32;
+        for i in 0..n {
+            let t = tri(i);
+            if !seg.intersects(&t.aabb()) {
+                continue;
+            }
+            match ray_hit(p, q, &t) {
+                Hit::Miss => {}
+                Hit::Cross => crossings += 1,
+                Hit::Degenerate => continue 'rays,
+            }
+        }
+        return Some(crossings % 2 == 1);
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use frcd_geom::shapes;
+
+    #[test]
+    fn parity_inside_and_outside_an_icosphere_and_a_cube() {
+        let s = shapes::icosphere(1.0, 3);
+        let tris: Vec<Triangle> = s.triangles().collect();
+        let b = s.aabb();
+        for (p, inside) in [
+            (DVec3::ZERO, true),
+            (DVec3::new(0.9, 0.0, 0.0), true),
+            (DVec3::new(0.5, 0.5, 0.5), true),
+            (DVec3::new(1.01, 0.0, 0.0), false),
+            (DVec3::new(0.7, 0.7, 0.7), false),
+        ] {
+            assert_eq!(
+                point_inside(p, tris.len(), |i| tris[i], &b, 1),
+                Some(inside),
+                "{p}"
+            );
+        }
+        // A cube: rays along axes through the centre hit edges and face diagonals; the
+        // perturbed directions must still count right.
+        let c = shapes::cuboid(DVec3::ONE);
+        let tris: Vec<Triangle> = c.triangles().collect();
+        for seed in 0..20 {
+            assert_eq!(
+                point_inside(DVec3::ZERO, 12, |i| tris[i], &c.aabb(), seed),
+                Some(true)
+            );
+            assert_eq!(
+                point_inside(DVec3::new(0.0, 0.0, 0.99), 12, |i| tris[i], &c.aabb(), seed),
+                Some(true)
+            );
+        }
+    }
+}

@@ -1,0 +1,357 @@
+//! `cargo xtask bench hybrid`: run time against error of every backend and mode of the hybrid
+//! scheduler, on the bogie demo (`testdata/bogie/scene.json`, when present) and on generated
+//! scenes; written to `testdata/bench/hybrid.md` (table) and `testdata/bench/hybrid.svg` (plot).
+//!
+//! Per scene and row (backend × mode): the median, mean and 95th-percentile time per frame
+//! (`Checker::check`, everything included), and the error against the CPU exact row (itself
+//! checked against the brute-force oracle on every `--oracle-every`-th frame): body-pair frames
+//! missed, and the fraction of touching triangle pairs missed. Exact rows must have zero error.
+//!
+//! Options: `--frames N` (default 1000), `--bogie PATH`, `--cost FILE`, `--out DIR`,
+//! `--oracle-every K` (default 100).
+
+use anyhow::{Context, Result, bail};
+use frcd_benches::scenes;
+use frcd_geom::{Pose, TriMesh};
+use frcd_hybrid::{Backend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, Mode, Options};
+use frcd_obb::oracle;
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+struct Opts {
+    frames: usize,
+    bogie: PathBuf,
+    cost: Option<PathBuf>,
+    out: PathBuf,
+    oracle_every: usize,
+}
+
+fn parse(args: &[String]) -> Result<Opts> {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut o = Opts {
+        frames: 1000,
+        bogie: root.join("testdata/bogie/scene.json"),
+        cost: None,
+        out: root.join("testdata/bench"),
+        oracle_every: 100,
+    };
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        let mut val = || it.next().cloned().with_context(|| format!("{a} needs a value"));
+        match a.as_str() {
+            "--frames" => o.frames = val()?.parse().context("--frames")?,
+            "--bogie" => o.bogie = val()?.into(),
+            "--cost" => o.cost = Some(val()?.into()),
+            "--out" => o.out = val()?.into(),
+            "--oracle-every" => o.oracle_every = val()?.parse::<usize>().context("--oracle-every")?.max(1),
+            other => bail!("bench hybrid: unknown option '{other}'"),
+        }
+    }
+    Ok(o)
+}
+
+/// A scene for the benchmark: bodies, exclusions, frames.
+struct BenchScene {
+    name: String,
+    bodies: Vec<BodySpec>,
+    exclude: Vec<(usize, usize)>,
+    frames: Vec<Vec<Pose>>,
+}
+
+fn bogie(path: &std::path::Path, frames: usize) -> Result<Option<BenchScene>> {
+    if !path.exists() {
+        println!("SKIP bogie: {} not found (run `cargo xtask gen-bogie`)", path.display());
+        return Ok(None);
+    }
+    let s = frcd_io::Scene::load(path)?;
+    Ok(Some(BenchScene {
+        name: "bogie demo".into(),
+        bodies: s
+            .bodies()
+            .iter()
+            .map(|b| BodySpec {
+                name: b.name.clone(),
+                mesh: b.mesh.clone(),
+                is_static: b.is_static,
+            })
+            .collect(),
+        exclude: s.exclusions().to_vec(),
+        frames: s.frames().iter().take(frames).map(|f| f.poses.clone()).collect(),
+    }))
+}
+
+fn generated(s: scenes::Scene, frames: usize) -> BenchScene {
+    BenchScene {
+        name: s.name.clone(),
+        bodies: s
+            .bodies
+            .iter()
+            .map(|b| BodySpec {
+                name: b.name.clone(),
+                mesh: b.mesh.clone(),
+                is_static: b.is_static,
+            })
+            .collect(),
+        exclude: Vec::new(),
+        frames: s.frames.into_iter().take(frames).collect(),
+    }
+}
+
+type Answer = Vec<(usize, usize, Vec<(u32, u32)>, bool)>;
+
+struct Row {
+    scene: String,
+    backend: &'static str,
+    mode: &'static str,
+    median_us: f64,
+    mean_us: f64,
+    p95_us: f64,
+    missed_bodies: usize,
+    body_frames: usize,
+    missed_tri_fraction: f64,
+    stages: String,
+}
+
+fn run_row(s: &BenchScene, options: Options) -> Result<(Vec<f64>, Vec<Answer>, String)> {
+    let checker = Checker::new(s.bodies.clone(), &s.exclude, options)?;
+    let mut state = FrameState::default();
+    let mut times = Vec::with_capacity(s.frames.len());
+    let mut answers = Vec::with_capacity(s.frames.len());
+    let mut stage_us = [0f64; 3];
+    let mut stage_kind: [Vec<String>; 3] = Default::default();
+    for poses in &s.frames {
+        let t = Instant::now();
+        let r = checker.check(poses, &mut state)?;
+        times.push(t.elapsed().as_secs_f64() * 1e6);
+        for (k, st) in r.stages.iter().enumerate() {
+            stage_us[k] += st.time_us;
+            let name = format!("{:?}", st.backend).to_lowercase();
+            if !stage_kind[k].contains(&name) {
+                stage_kind[k].push(name);
+            }
+        }
+        answers.push(
+            r.contacts
+                .into_iter()
+                .map(|c| (c.a, c.b, c.pairs, c.contained.is_some()))
+                .collect(),
+        );
+    }
+    let n = s.frames.len().max(1) as f64;
+    let stages = ["broad", "image", "narrow"]
+        .iter()
+        .enumerate()
+        .map(|(k, name)| format!("{name} {} {:.0}µs", stage_kind[k].join("/"), stage_us[k] / n))
+        .collect::<Vec<_>>()
+        .join(", ");
+    Ok((times, answers, stages))
+}
+
+fn oracle_frame(s: &BenchScene, poses: &[Pose]) -> Answer {
+    let mut out = Vec::new();
+    for a in 0..s.bodies.len() {
+        for b in a + 1..s.bodies.len() {
+            if (s.bodies[a].is_static && s.bodies[b].is_static) || s.exclude.contains(&(a, b)) {
+                continue;
+            }
+            let (ma, mb): (&Arc<TriMesh>, &Arc<TriMesh>) = (&s.bodies[a].mesh, &s.bodies[b].mesh);
+            let wa = ma.aabb().transformed(&poses[a]).inflated(1e-6);
+            let wb = mb.aabb().transformed(&poses[b]).inflated(1e-6);
+            if !wa.intersects(&wb) {
+                continue;
+            }
+            let ans = oracle::answer(ma, &poses[a], mb, &poses[b], true);
+            if ans.collide() {
+                out.push((a, b, ans.pairs, ans.contained.is_some()));
+            }
+        }
+    }
+    out
+}
+
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
+}
+
+/// Runs the suite.
+pub fn run(args: &[String]) -> Result<()> {
+    let o = parse(args)?;
+    let cost = match &o.cost {
+        Some(p) => CostModel::load(p)?,
+        None => CostModel::default(),
+    };
+    let mut all = Vec::new();
+    if let Some(b) = bogie(&o.bogie, o.frames)? {
+        all.push(b);
+    }
+    all.push(generated(scenes::sparse(200, o.frames.min(200), 7), o.frames));
+    all.push(generated(scenes::wheelset_on_rails(o.frames.min(100)), o.frames));
+    let rows_spec: [(Backend, Mode); 5] = [
+        (Backend::Cpu, Mode::Exact),
+        (Backend::Hybrid, Mode::Exact),
+        (Backend::Gpgpu, Mode::Exact),
+        (Backend::Hybrid, Mode::Fast),
+        (Backend::Image, Mode::Fast),
+    ];
+    let mut rows = Vec::new();
+    let mut adapter = String::from("none");
+    for s in &all {
+        println!("{}: {} bodies, {} frames", s.name, s.bodies.len(), s.frames.len());
+        let mut truth: Option<Vec<Answer>> = None;
+        for (backend, mode) in rows_spec {
+            let options = Options {
+                backend,
+                mode,
+                cost: cost.clone(),
+                gpu: if backend == Backend::Cpu { GpuPolicy::Off } else { GpuPolicy::Auto },
+                ..Options::default()
+            };
+            let (mut times, answers, stages) = match run_row(s, options) {
+                Ok(x) => x,
+                Err(e) => {
+                    println!("  {:<7} {:<6} skipped: {e}", backend.name(), mode.name());
+                    continue;
+                }
+            };
+            if backend == Backend::Gpgpu {
+                if let Ok(c) = frcd_gpgpu::GpuContext::headless() {
+                    adapter = c.adapter_info().name.clone();
+                }
+            }
+            let t = match &truth {
+                Some(t) => t,
+                None => {
+                    // The CPU exact row, checked against the oracle on sampled frames.
+                    for (i, poses) in s.frames.iter().enumerate().step_by(o.oracle_every) {
+                        if oracle_frame(s, poses) != answers[i] {
+                            bail!("{}: cpu exact differs from the oracle at frame {i}", s.name);
+                        }
+                    }
+                    truth = Some(answers.clone());
+                    truth.as_ref().expect("set")
+                }
+            };
+            let (mut missed, mut body_frames, mut tri_total, mut tri_missed) = (0, 0, 0usize, 0usize);
+            for (tf, gf) in t.iter().zip(&answers) {
+                for (a, b, pairs, _) in tf {
+                    body_frames += 1;
+                    tri_total += pairs.len();
+                    match gf.iter().find(|g| g.0 == *a && g.1 == *b) {
+                        None => {
+                            missed += 1;
+                            tri_missed += pairs.len();
+                        }
+                        Some(g) => tri_missed += pairs.iter().filter(|p| g.2.binary_search(p).is_err()).count(),
+                    }
+                }
+            }
+            let mean = times.iter().sum::<f64>() / times.len() as f64;
+            times.sort_by(f64::total_cmp);
+            let row = Row {
+                scene: s.name.clone(),
+                backend: backend.name(),
+                mode: mode.name(),
+                median_us: percentile(&times, 0.5),
+                mean_us: mean,
+                p95_us: percentile(&times, 0.95),
+                missed_bodies: missed,
+                body_frames,
+                missed_tri_fraction: if tri_total == 0 { 0.0 } else { tri_missed as f64 / tri_total as f64 },
+                stages,
+            };
+            println!(
+                "  {:<7} {:<6} median {:>9.1} µs  mean {:>9.1} µs  p95 {:>9.1} µs  missed {}/{} pair-frames, {:.2}% triangle pairs  [{}]",
+                row.backend, row.mode, row.median_us, row.mean_us, row.p95_us, row.missed_bodies, row.body_frames,
+                100.0 * row.missed_tri_fraction, row.stages
+            );
+            if mode == Mode::Exact && (row.missed_bodies > 0 || row.missed_tri_fraction > 0.0) {
+                bail!("{}: exact row {} lost pairs", s.name, row.backend);
+            }
+            rows.push(row);
+        }
+    }
+    std::fs::create_dir_all(&o.out)?;
+    let mut md = String::new();
+    writeln!(
+        md,
+        "# Hybrid scheduler: run time against error\n\n`cargo xtask bench hybrid` on {} threads, GPU: {adapter}. Error against cpu exact (itself checked against the brute-force oracle every {} frames).\n",
+        rayon::current_num_threads(),
+        o.oracle_every
+    )?;
+    writeln!(md, "| scene | backend | mode | median µs/frame | mean µs | p95 µs | missed pair-frames | missed triangle pairs | stages (mean per frame) |")?;
+    writeln!(md, "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | --- |")?;
+    for r in &rows {
+        writeln!(
+            md,
+            "| {} | {} | {} | {:.1} | {:.1} | {:.1} | {}/{} | {:.2}% | {} |",
+            r.scene, r.backend, r.mode, r.median_us, r.mean_us, r.p95_us, r.missed_bodies, r.body_frames,
+            100.0 * r.missed_tri_fraction, r.stages
+        )?;
+    }
+    let md_path = o.out.join("hybrid.md");
+    std::fs::write(&md_path, md)?;
+    let svg_path = o.out.join("hybrid.svg");
+    plot(&svg_path, &rows, &adapter)?;
+    println!("wrote {} and {}", md_path.display(), svg_path.display());
+    Ok(())
+}
+
+fn plot(path: &std::path::Path, rows: &[Row], adapter: &str) -> Result<()> {
+    use plotters::prelude::*;
+    if rows.is_empty() {
+        return Ok(());
+    }
+    let xs: Vec<f64> = rows.iter().map(|r| r.median_us.max(0.1).log10()).collect();
+    let ys: Vec<f64> = rows.iter().map(|r| 100.0 * r.missed_tri_fraction).collect();
+    let (x0, x1) = (
+        xs.iter().copied().fold(f64::MAX, f64::min) - 0.3,
+        xs.iter().copied().fold(f64::MIN, f64::max) + 0.3,
+    );
+    let y1 = ys.iter().copied().fold(0.0, f64::max).max(1.0) * 1.15;
+    let root = SVGBackend::new(path, (900, 520)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(format!("hybrid scheduler: error vs time per frame (GPU = {adapter})"), ("sans-serif", 16))
+        .margin(15)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(x0..x1, -0.05 * y1..y1)?;
+    chart
+        .configure_mesh()
+        .x_desc("log10 median µs per frame")
+        .y_desc("% touching triangle pairs missed")
+        .draw()?;
+    let scenes: Vec<&str> = {
+        let mut v: Vec<&str> = rows.iter().map(|r| r.scene.as_str()).collect();
+        v.dedup();
+        v
+    };
+    let colors = [BLUE, RED, GREEN, MAGENTA, CYAN];
+    for (k, sc) in scenes.iter().enumerate() {
+        let c = colors[k % colors.len()];
+        let pts: Vec<(f64, f64, String)> = rows
+            .iter()
+            .zip(xs.iter().zip(&ys))
+            .filter(|(r, _)| r.scene == *sc)
+            .map(|(r, (&x, &y))| (x, y, format!("{} {}", r.backend, r.mode)))
+            .collect();
+        chart
+            .draw_series(pts.iter().map(|(x, y, _)| Circle::new((*x, *y), 4, c.filled())))?
+            .label(sc.to_string())
+            .legend(move |(x, y)| Circle::new((x, y), 4, c.filled()));
+        chart.draw_series(
+            pts.iter()
+                .map(|(x, y, l)| Text::new(l.clone(), (*x, *y), ("sans-serif", 11).into_font().color(&c))),
+        )?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
