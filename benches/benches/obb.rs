@@ -451,6 +451,7 @@ fn bench_sparse(c: &mut Criterion) {
                     .enumerate()
                     .map(|(i, body)| {
                         w.add_body(big_trees[i].clone(), big.frames[0][i], body.is_static)
+                            .expect("valid pose")
                     })
                     .collect();
                 let mut n = 0;

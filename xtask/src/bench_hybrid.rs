@@ -39,13 +39,19 @@ fn parse(args: &[String]) -> Result<Opts> {
     };
     let mut it = args.iter();
     while let Some(a) = it.next() {
-        let mut val = || it.next().cloned().with_context(|| format!("{a} needs a value"));
+        let mut val = || {
+            it.next()
+                .cloned()
+                .with_context(|| format!("{a} needs a value"))
+        };
         match a.as_str() {
             "--frames" => o.frames = val()?.parse().context("--frames")?,
             "--bogie" => o.bogie = val()?.into(),
             "--cost" => o.cost = Some(val()?.into()),
             "--out" => o.out = val()?.into(),
-            "--oracle-every" => o.oracle_every = val()?.parse::<usize>().context("--oracle-every")?.max(1),
+            "--oracle-every" => {
+                o.oracle_every = val()?.parse::<usize>().context("--oracle-every")?.max(1)
+            }
             other => bail!("bench hybrid: unknown option '{other}'"),
         }
     }
@@ -62,7 +68,10 @@ struct BenchScene {
 
 fn bogie(path: &std::path::Path, frames: usize) -> Result<Option<BenchScene>> {
     if !path.exists() {
-        println!("SKIP bogie: {} not found (run `cargo xtask gen-bogie`)", path.display());
+        println!(
+            "SKIP bogie: {} not found (run `cargo xtask gen-bogie`)",
+            path.display()
+        );
         return Ok(None);
     }
     let s = frcd_io::Scene::load(path)?;
@@ -78,7 +87,12 @@ fn bogie(path: &std::path::Path, frames: usize) -> Result<Option<BenchScene>> {
             })
             .collect(),
         exclude: s.exclusions().to_vec(),
-        frames: s.frames().iter().take(frames).map(|f| f.poses.clone()).collect(),
+        frames: s
+            .frames()
+            .iter()
+            .take(frames)
+            .map(|f| f.poses.clone())
+            .collect(),
     }))
 }
 
@@ -114,7 +128,9 @@ struct Row {
     stages: String,
 }
 
-fn run_row(s: &BenchScene, options: Options) -> Result<(Vec<f64>, Vec<Answer>, String)> {
+type RowRun = (Vec<f64>, Vec<Answer>, String, Vec<String>);
+
+fn run_row(s: &BenchScene, options: Options) -> Result<RowRun> {
     let checker = Checker::new(s.bodies.clone(), &s.exclude, options)?;
     let mut state = FrameState::default();
     let mut times = Vec::with_capacity(s.frames.len());
@@ -143,10 +159,16 @@ fn run_row(s: &BenchScene, options: Options) -> Result<(Vec<f64>, Vec<Answer>, S
     let stages = ["broad", "image", "narrow"]
         .iter()
         .enumerate()
-        .map(|(k, name)| format!("{name} {} {:.0}µs", stage_kind[k].join("/"), stage_us[k] / n))
+        .map(|(k, name)| {
+            format!(
+                "{name} {} {:.0}µs",
+                stage_kind[k].join("/"),
+                stage_us[k] / n
+            )
+        })
         .collect::<Vec<_>>()
         .join(", ");
-    Ok((times, answers, stages))
+    Ok((times, answers, stages, checker.adapters()))
 }
 
 fn oracle_frame(s: &BenchScene, poses: &[Pose]) -> Answer {
@@ -186,8 +208,14 @@ pub fn run(args: &[String]) -> Result<()> {
     if let Some(b) = bogie(&o.bogie, o.frames)? {
         all.push(b);
     }
-    all.push(generated(scenes::sparse(200, o.frames.min(200), 7), o.frames));
-    all.push(generated(scenes::wheelset_on_rails(o.frames.min(100)), o.frames));
+    all.push(generated(
+        scenes::sparse(200, o.frames.min(200), 7),
+        o.frames,
+    ));
+    all.push(generated(
+        scenes::wheelset_on_rails(o.frames.min(100)),
+        o.frames,
+    ));
     let rows_spec: [(Backend, Mode); 5] = [
         (Backend::Cpu, Mode::Exact),
         (Backend::Hybrid, Mode::Exact),
@@ -198,28 +226,36 @@ pub fn run(args: &[String]) -> Result<()> {
     let mut rows = Vec::new();
     let mut adapter = String::from("none");
     for s in &all {
-        println!("{}: {} bodies, {} frames", s.name, s.bodies.len(), s.frames.len());
+        println!(
+            "{}: {} bodies, {} frames",
+            s.name,
+            s.bodies.len(),
+            s.frames.len()
+        );
         let mut truth: Option<Vec<Answer>> = None;
         for (backend, mode) in rows_spec {
             let options = Options {
                 backend,
                 mode,
                 cost: cost.clone(),
-                gpu: if backend == Backend::Cpu { GpuPolicy::Off } else { GpuPolicy::Auto },
+                gpu: if backend == Backend::Cpu {
+                    GpuPolicy::Off
+                } else {
+                    GpuPolicy::Auto
+                },
                 ..Options::default()
             };
-            let (mut times, answers, stages) = match run_row(s, options) {
+            let (mut times, answers, stages, devices) = match run_row(s, options) {
                 Ok(x) => x,
                 Err(e) => {
                     println!("  {:<7} {:<6} skipped: {e}", backend.name(), mode.name());
                     continue;
                 }
             };
-            if backend == Backend::Gpgpu {
-                if let Ok(c) = frcd_gpgpu::GpuContext::headless() {
-                    adapter = c.adapter_info().name.clone();
-                }
+            if let Some(d) = devices.first() {
+                adapter = d.clone();
             }
+
             let t = match &truth {
                 Some(t) => t,
                 None => {
@@ -233,7 +269,8 @@ pub fn run(args: &[String]) -> Result<()> {
                     truth.as_ref().expect("set")
                 }
             };
-            let (mut missed, mut body_frames, mut tri_total, mut tri_missed) = (0, 0, 0usize, 0usize);
+            let (mut missed, mut body_frames, mut tri_total, mut tri_missed) =
+                (0, 0, 0usize, 0usize);
             for (tf, gf) in t.iter().zip(&answers) {
                 for (a, b, pairs, _) in tf {
                     body_frames += 1;
@@ -243,7 +280,12 @@ pub fn run(args: &[String]) -> Result<()> {
                             missed += 1;
                             tri_missed += pairs.len();
                         }
-                        Some(g) => tri_missed += pairs.iter().filter(|p| g.2.binary_search(p).is_err()).count(),
+                        Some(g) => {
+                            tri_missed += pairs
+                                .iter()
+                                .filter(|p| g.2.binary_search(p).is_err())
+                                .count()
+                        }
                     }
                 }
             }
@@ -258,13 +300,24 @@ pub fn run(args: &[String]) -> Result<()> {
                 p95_us: percentile(&times, 0.95),
                 missed_bodies: missed,
                 body_frames,
-                missed_tri_fraction: if tri_total == 0 { 0.0 } else { tri_missed as f64 / tri_total as f64 },
+                missed_tri_fraction: if tri_total == 0 {
+                    0.0
+                } else {
+                    tri_missed as f64 / tri_total as f64
+                },
                 stages,
             };
             println!(
                 "  {:<7} {:<6} median {:>9.1} µs  mean {:>9.1} µs  p95 {:>9.1} µs  missed {}/{} pair-frames, {:.2}% triangle pairs  [{}]",
-                row.backend, row.mode, row.median_us, row.mean_us, row.p95_us, row.missed_bodies, row.body_frames,
-                100.0 * row.missed_tri_fraction, row.stages
+                row.backend,
+                row.mode,
+                row.median_us,
+                row.mean_us,
+                row.p95_us,
+                row.missed_bodies,
+                row.body_frames,
+                100.0 * row.missed_tri_fraction,
+                row.stages
             );
             if mode == Mode::Exact && (row.missed_bodies > 0 || row.missed_tri_fraction > 0.0) {
                 bail!("{}: exact row {} lost pairs", s.name, row.backend);
@@ -280,14 +333,28 @@ pub fn run(args: &[String]) -> Result<()> {
         rayon::current_num_threads(),
         o.oracle_every
     )?;
-    writeln!(md, "| scene | backend | mode | median µs/frame | mean µs | p95 µs | missed pair-frames | missed triangle pairs | stages (mean per frame) |")?;
-    writeln!(md, "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | --- |")?;
+    writeln!(
+        md,
+        "| scene | backend | mode | median µs/frame | mean µs | p95 µs | missed pair-frames | missed triangle pairs | stages (mean per frame) |"
+    )?;
+    writeln!(
+        md,
+        "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | --- |"
+    )?;
     for r in &rows {
         writeln!(
             md,
             "| {} | {} | {} | {:.1} | {:.1} | {:.1} | {}/{} | {:.2}% | {} |",
-            r.scene, r.backend, r.mode, r.median_us, r.mean_us, r.p95_us, r.missed_bodies, r.body_frames,
-            100.0 * r.missed_tri_fraction, r.stages
+            r.scene,
+            r.backend,
+            r.mode,
+            r.median_us,
+            r.mean_us,
+            r.p95_us,
+            r.missed_bodies,
+            r.body_frames,
+            100.0 * r.missed_tri_fraction,
+            r.stages
         )?;
     }
     let md_path = o.out.join("hybrid.md");
@@ -313,7 +380,10 @@ fn plot(path: &std::path::Path, rows: &[Row], adapter: &str) -> Result<()> {
     let root = SVGBackend::new(path, (900, 520)).into_drawing_area();
     root.fill(&WHITE)?;
     let mut chart = ChartBuilder::on(&root)
-        .caption(format!("hybrid scheduler: error vs time per frame (GPU = {adapter})"), ("sans-serif", 16))
+        .caption(
+            format!("hybrid scheduler: error vs time per frame (GPU = {adapter})"),
+            ("sans-serif", 16),
+        )
         .margin(15)
         .x_label_area_size(40)
         .y_label_area_size(60)
@@ -338,13 +408,19 @@ fn plot(path: &std::path::Path, rows: &[Row], adapter: &str) -> Result<()> {
             .map(|(r, (&x, &y))| (x, y, format!("{} {}", r.backend, r.mode)))
             .collect();
         chart
-            .draw_series(pts.iter().map(|(x, y, _)| Circle::new((*x, *y), 4, c.filled())))?
+            .draw_series(
+                pts.iter()
+                    .map(|(x, y, _)| Circle::new((*x, *y), 4, c.filled())),
+            )?
             .label(sc.to_string())
             .legend(move |(x, y)| Circle::new((x, y), 4, c.filled()));
-        chart.draw_series(
-            pts.iter()
-                .map(|(x, y, l)| Text::new(l.clone(), (*x, *y), ("sans-serif", 11).into_font().color(&c))),
-        )?;
+        chart.draw_series(pts.iter().map(|(x, y, l)| {
+            Text::new(
+                l.clone(),
+                (*x, *y),
+                ("sans-serif", 11).into_font().color(&c),
+            )
+        }))?;
     }
     chart
         .configure_series_labels()

@@ -278,7 +278,7 @@ impl Backend for ObbWorld {
             .iter()
             .zip(&scene.bodies)
             .zip(first)
-            .map(|((t, b), p)| world.try_add_body(t.clone(), *p, b.is_static))
+            .map(|((t, b), p)| world.add_body(t.clone(), *p, b.is_static))
             .collect::<Result<_, _>>()?;
         let mut out = Vec::new();
         for poses in &scene.frames {

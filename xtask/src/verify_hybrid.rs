@@ -19,7 +19,9 @@ use crate::verify::{Answers, Backend, PairAnswer, exact_compare};
 use anyhow::Result;
 use frcd_benches::scenes::Scene;
 use frcd_geom::{Pose, TriMesh};
-use frcd_hybrid::{Backend as HBackend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, Mode, Options};
+use frcd_hybrid::{
+    Backend as HBackend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, Mode, Options,
+};
 use frcd_image::reference::reference_image;
 use frcd_image::{ImageDetector, ImageOptions, ImageScratch};
 use std::sync::Arc;
@@ -95,7 +97,11 @@ impl Backend for HybridRow {
 fn fast_compare(f: &FastCheck, truth: &Answers, got: &Answers) -> Vec<String> {
     let mut out = Vec::new();
     if truth.len() != got.len() {
-        out.push(format!("{} steps answered, {} expected", got.len(), truth.len()));
+        out.push(format!(
+            "{} steps answered, {} expected",
+            got.len(),
+            truth.len()
+        ));
         return out;
     }
     let mut scratch = ImageScratch::default();
@@ -104,19 +110,34 @@ fn fast_compare(f: &FastCheck, truth: &Answers, got: &Answers) -> Vec<String> {
         let poses = &f.frames[step];
         for gp in g {
             let Some(tp) = t.iter().find(|p| p.a == gp.a && p.b == gp.b) else {
-                out.push(format!("step {step}: reports ({}, {}) which does not interfere", gp.a, gp.b));
+                out.push(format!(
+                    "step {step}: reports ({}, {}) which does not interfere",
+                    gp.a, gp.b
+                ));
                 continue;
             };
             found += 1;
-            let (tpairs, gpairs) = (tp.pairs.as_deref().unwrap_or(&[]), gp.pairs.as_deref().unwrap_or(&[]));
+            let (tpairs, gpairs) = (
+                tp.pairs.as_deref().unwrap_or(&[]),
+                gp.pairs.as_deref().unwrap_or(&[]),
+            );
             if let Some(x) = gpairs.iter().find(|x| tpairs.binary_search(x).is_err()) {
-                out.push(format!("step {step}, ({}, {}): false triangle pair {x:?}", gp.a, gp.b));
+                out.push(format!(
+                    "step {step}, ({}, {}): false triangle pair {x:?}",
+                    gp.a, gp.b
+                ));
             }
             if gp.contained && !tp.contained {
-                out.push(format!("step {step}, ({}, {}): false containment", gp.a, gp.b));
+                out.push(format!(
+                    "step {step}, ({}, {}): false containment",
+                    gp.a, gp.b
+                ));
             }
-            let missing: Vec<(u32, u32)> =
-                tpairs.iter().filter(|x| gpairs.binary_search(x).is_err()).copied().collect();
+            let missing: Vec<(u32, u32)> = tpairs
+                .iter()
+                .filter(|x| gpairs.binary_search(x).is_err())
+                .copied()
+                .collect();
             if !missing.is_empty() {
                 missed_tris += missing.len();
                 // Explained when the image stage's colliding set excludes the pair.
@@ -131,7 +152,8 @@ fn fast_compare(f: &FastCheck, truth: &Answers, got: &Answers) -> Vec<String> {
                         let inside = missing
                             .iter()
                             .filter(|(x, y)| {
-                                cs.tris_a.binary_search(x).is_ok() && cs.tris_b.binary_search(y).is_ok()
+                                cs.tris_a.binary_search(x).is_ok()
+                                    && cs.tris_b.binary_search(y).is_ok()
                             })
                             .count();
                         if inside > 0 {
@@ -157,7 +179,10 @@ fn fast_compare(f: &FastCheck, truth: &Answers, got: &Answers) -> Vec<String> {
             match upload_query(f, &mut scratch, tp.a, tp.b, poses, &opts) {
                 Ok(r) => {
                     let Some(view) = &r.view else {
-                        out.push(format!("step {step}, ({}, {}): missed, boxes disjoint", tp.a, tp.b));
+                        out.push(format!(
+                            "step {step}, ({}, {}): missed, boxes disjoint",
+                            tp.a, tp.b
+                        ));
                         continue;
                     };
                     let rel = poses[tp.b].relative_to(&poses[tp.a]);
@@ -225,7 +250,10 @@ pub fn backends() -> Vec<Box<dyn Backend>> {
             fast: None,
         }),
     ];
-    let det = match (frcd_gpgpu::GpuContext::headless(), ImageDetector::headless()) {
+    let det = match (
+        frcd_gpgpu::GpuContext::headless(),
+        ImageDetector::headless(),
+    ) {
         (Ok(_), Ok(det)) => det,
         (Err(e), _) => return skip(out, &e.to_string()),
         (_, Err(e)) => return skip(out, &e.to_string()),

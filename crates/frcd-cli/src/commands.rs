@@ -22,6 +22,7 @@ pub struct CheckRun {
     pub first: usize,
     pub count: Option<usize>,
     pub quiet: bool,
+    pub pair_times: bool,
 }
 
 fn load_scene(path: &Path, trajectory: Option<&Path>) -> Result<Scene> {
@@ -79,6 +80,14 @@ fn options_of(args: &CheckerArgs, segments: bool) -> Result<(Options, String)> {
             segments,
             image_resolution: args.resolution,
             cost,
+            build: frcd_obb::BuildOptions {
+                fit: match args.fit {
+                    crate::FitArg::Vertex => frcd_obb::FitMethod::VertexCovariance,
+                    crate::FitArg::Area => frcd_obb::FitMethod::AreaWeighted,
+                    crate::FitArg::Hull => frcd_obb::FitMethod::HullSurface,
+                },
+                max_leaf_triangles: args.leaf.max(1),
+            },
             ..Options::default()
         },
         source,
@@ -117,7 +126,13 @@ fn segment_points(c: &Contact) -> Vec<[frcd_geom::DVec3; 2]> {
     }
 }
 
-fn frame_report(checker: &Checker, index: usize, time_us: f64, r: &FrameResult, poses: &[Pose]) -> FrameReport {
+fn frame_report(
+    checker: &Checker,
+    index: usize,
+    time_us: f64,
+    r: &FrameResult,
+    poses: &[Pose],
+) -> FrameReport {
     let interferences = r
         .contacts
         .iter()
@@ -171,7 +186,12 @@ impl StageTally {
     }
     fn describe(&self) -> String {
         let mut parts = Vec::new();
-        for (n, name) in [(self.cpu, "cpu"), (self.gpu, "gpu"), (self.mixed, "cpu+gpu"), (self.skipped, "skipped")] {
+        for (n, name) in [
+            (self.cpu, "cpu"),
+            (self.gpu, "gpu"),
+            (self.mixed, "cpu+gpu"),
+            (self.skipped, "skipped"),
+        ] {
             if n > 0 {
                 parts.push(format!("{name} {n}"));
             }
@@ -200,7 +220,10 @@ pub fn check(run: &CheckRun) -> Result<()> {
     let frames = frames_of(&scene);
     let n = frames.len();
     if run.first >= n {
-        bail!("--first {} is past the last frame (the scene has {n})", run.first);
+        bail!(
+            "--first {} is past the last frame (the scene has {n})",
+            run.first
+        );
     }
     let end = match run.count {
         Some(c) => (run.first + c).min(n),
@@ -210,6 +233,7 @@ pub fn check(run: &CheckRun) -> Result<()> {
     report.scene = Some(run.scene.display().to_string());
     let mut state = FrameState::default();
     let mut tallies: [StageTally; 3] = Default::default();
+    let mut pair_time: std::collections::HashMap<(usize, usize), (f64, usize)> = Default::default();
     let progress = !run.quiet && end - run.first > 200;
     let mut last_progress = Instant::now();
     let total = end - run.first;
@@ -223,10 +247,24 @@ pub fn check(run: &CheckRun) -> Result<()> {
         for (tally, s) in tallies.iter_mut().zip(&r.stages) {
             tally.add(s.backend, s.time_us);
         }
-        report.frames.push(frame_report(&checker, index, time_us, &r, poses));
+        if run.pair_times {
+            for &(a, b, us) in &r.pair_times_us {
+                let e = pair_time.entry((a, b)).or_default();
+                e.0 += us;
+                e.1 += 1;
+            }
+        }
+        report
+            .frames
+            .push(frame_report(&checker, index, time_us, &r, poses));
         if progress && last_progress.elapsed().as_millis() >= 250 {
             last_progress = Instant::now();
-            eprint!("\rframe {}/{} ({:.0}%)", k + 1, total, 100.0 * (k + 1) as f64 / total as f64);
+            eprint!(
+                "\rframe {}/{} ({:.0}%)",
+                k + 1,
+                total,
+                100.0 * (k + 1) as f64 / total as f64
+            );
             let _ = std::io::stderr().flush();
         }
     }
@@ -262,6 +300,20 @@ pub fn check(run: &CheckRun) -> Result<()> {
     for (name, t) in ["broad", "image", "narrow"].iter().zip(&tallies) {
         println!("  stage {name:<6}: {}", t.describe());
     }
+    if run.pair_times {
+        let mut v: Vec<_> = pair_time.into_iter().collect();
+        v.sort_by(|x, y| y.1.0.total_cmp(&x.1.0));
+        println!("  narrow-phase time by body pair (total over frames, CPU time of the pair):");
+        for ((a, b), (us, n)) in v.iter().take(12) {
+            println!(
+                "    {:>9.1} ms  {:>7.1} µs/frame  {} / {} ({n} frames)",
+                us / 1e3,
+                us / total as f64,
+                checker.body_name(*a).unwrap_or("?"),
+                checker.body_name(*b).unwrap_or("?")
+            );
+        }
+    }
     if report.pairs.is_empty() {
         println!("no interference");
     } else if !run.quiet {
@@ -270,7 +322,13 @@ pub fn check(run: &CheckRun) -> Result<()> {
             let intervals: Vec<String> = p
                 .intervals
                 .iter()
-                .map(|[a, b]| if a == b { format!("{a}") } else { format!("{a}-{b}") })
+                .map(|[a, b]| {
+                    if a == b {
+                        format!("{a}")
+                    } else {
+                        format!("{a}-{b}")
+                    }
+                })
                 .collect();
             println!(
                 "  {} / {}: frames {}..{} ({} frames, up to {} triangle pairs): {}",
@@ -321,7 +379,10 @@ pub fn render(
     let scene = load_scene(scene_path, args.trajectory.as_deref())?;
     let frames = frames_of(&scene);
     let Some(poses) = frames.get(frame) else {
-        bail!("--frame {frame} is past the last frame (the scene has {})", frames.len());
+        bail!(
+            "--frame {frame} is past the last frame (the scene has {})",
+            frames.len()
+        );
     };
     let (options, _) = options_of(args, false)?;
     let checker = make_checker(&scene, options)?;
@@ -361,7 +422,11 @@ pub fn render(
                 checker.body_name(c.a).unwrap_or("?"),
                 checker.body_name(c.b).unwrap_or("?"),
                 c.pairs.len(),
-                if c.contained.is_some() { " (contained)" } else { "" }
+                if c.contained.is_some() {
+                    " (contained)"
+                } else {
+                    ""
+                }
             );
         }
         Ok(())
@@ -392,7 +457,12 @@ struct BenchRow {
     note: String,
 }
 
-pub fn bench(scene_path: &Path, frames: usize, cost: Option<&Path>, json: Option<&Path>) -> Result<()> {
+pub fn bench(
+    scene_path: &Path,
+    frames: usize,
+    cost: Option<&Path>,
+    json: Option<&Path>,
+) -> Result<()> {
     let scene = load_scene(scene_path, None)?;
     let all = frames_of(&scene);
     let frames = frames.clamp(1, all.len());
@@ -467,7 +537,8 @@ pub fn bench(scene_path: &Path, frames: usize, cost: Option<&Path>, json: Option
                 .iter()
                 .zip(&answers)
                 .map(|(t, g)| {
-                    t.iter().filter(|x| !g.contains(x)).count() + g.iter().filter(|x| !t.contains(x)).count()
+                    t.iter().filter(|x| !g.contains(x)).count()
+                        + g.iter().filter(|x| !t.contains(x)).count()
                 })
                 .sum(),
         };
@@ -503,7 +574,8 @@ pub fn bench(scene_path: &Path, frames: usize, cost: Option<&Path>, json: Option
     }
     if let Some(path) = json {
         let text = serde_json::to_string_pretty(&out).context("bench table to JSON")?;
-        std::fs::write(path, text + "\n").with_context(|| format!("cannot write {}", path.display()))?;
+        std::fs::write(path, text + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(())
 }
@@ -528,7 +600,10 @@ pub fn calibrate(output: &Path, repetitions: usize, cpu_only: bool) -> Result<()
             format!(" (GPU: {})", model.adapter)
         }
     );
-    println!("{}", serde_json::to_string_pretty(&model).context("model to JSON")?);
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&model).context("model to JSON")?
+    );
     match model.gpu_broad_min_bodies() {
         Some(n) => println!("GPU box pass from {n} bodies"),
         None => println!("GPU box pass: never"),

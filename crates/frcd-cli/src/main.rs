@@ -66,6 +66,24 @@ pub struct CheckerArgs {
     /// Extra trajectory CSV (`frame,body,x,y,z,qx,qy,qz,qw`) merged into the scene's frames.
     #[arg(long)]
     pub trajectory: Option<PathBuf>,
+    /// OBB tree: most triangles per leaf (4, frcd-hybrid's default, measured fastest on the
+    /// bogie demo: long thin tread triangles a few millimetres from the brake blocks).
+    #[arg(long, default_value_t = 4)]
+    pub leaf: u32,
+    /// OBB tree: box fitting rule.
+    #[arg(long, value_enum, default_value = "vertex")]
+    pub fit: FitArg,
+}
+
+/// OBB fitting rule on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum FitArg {
+    /// Covariance of the vertices.
+    Vertex,
+    /// Area-weighted covariance of the triangles.
+    Area,
+    /// Covariance of the convex hull's surface.
+    Hull,
 }
 
 #[derive(Subcommand, Debug)]
@@ -94,6 +112,9 @@ enum Command {
         /// No progress and no per-pair summary on the terminal.
         #[arg(long, short)]
         quiet: bool,
+        /// Print the body pairs that take the most narrow-phase time.
+        #[arg(long)]
+        pair_times: bool,
     },
     /// Render one frame with the interfering triangles highlighted.
     Render {
@@ -111,7 +132,8 @@ enum Command {
         /// Image height in pixels.
         #[arg(long, default_value_t = 800)]
         height: u32,
-        /// Frame the whole scene (default: the moving bodies).
+        /// Frame the whole scene (default: the interfering bodies seen from the contact side,
+        /// else the moving bodies).
         #[arg(long)]
         all: bool,
         #[command(flatten)]
@@ -157,6 +179,7 @@ fn main() -> ExitCode {
             first,
             count,
             quiet,
+            pair_times,
         } => commands::check(&commands::CheckRun {
             scene,
             checker,
@@ -166,6 +189,7 @@ fn main() -> ExitCode {
             first,
             count,
             quiet,
+            pair_times,
         }),
         Command::Render {
             scene,

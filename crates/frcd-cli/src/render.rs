@@ -63,6 +63,36 @@ pub fn render_png(
     if focus.is_empty() {
         focus = everything;
     }
+    let assembly_center = focus.center();
+    // With interference, frame the bodies involved and look from the side of the contact.
+    let mut hot_focus = Aabb::EMPTY;
+    let (mut hot_sum, mut hot_n) = (DVec3::ZERO, 0usize);
+    if !frame_all {
+        for ((b, p), m) in bodies.iter().zip(poses).zip(marks) {
+            let mut any = m.contained;
+            for (t, tri) in b.mesh.triangles().enumerate() {
+                if m.triangles.get(t).copied().unwrap_or(false) {
+                    any = true;
+                    hot_sum += p.transform_point((tri.v[0] + tri.v[1] + tri.v[2]) / 3.0);
+                    hot_n += 1;
+                }
+            }
+            if any && !b.is_static {
+                hot_focus = hot_focus.union(&b.mesh.aabb().transformed(p));
+            }
+        }
+    }
+    let mut dir = DVec3::new(0.9, -1.3, 0.8);
+    if !hot_focus.is_empty() {
+        focus = hot_focus;
+        if hot_n > 0 {
+            let c = hot_sum / hot_n as f64;
+            if c.y > assembly_center.y {
+                dir.y = -dir.y;
+            }
+            dir.z = 0.45;
+        }
+    }
     if focus.is_empty() {
         bail!("the scene has no geometry to render");
     }
@@ -81,7 +111,11 @@ pub fn render_png(
             PALETTE[i % PALETTE.len()]
         };
         for (t, tri) in b.mesh.triangles().enumerate() {
-            let w: Vec<DVec3> = tri.v.iter().map(|&v| p.transform_point(v) - center).collect();
+            let w: Vec<DVec3> = tri
+                .v
+                .iter()
+                .map(|&v| p.transform_point(v) - center)
+                .collect();
             let n = (w[1] - w[0]).cross(w[2] - w[0]).normalize_or_zero();
             let shade = (0.3 + 0.7 * n.dot(light).abs()) as f32;
             let is_hot = m.triangles.get(t).copied().unwrap_or(false);
@@ -93,7 +127,9 @@ pub fn render_png(
             }
         }
     }
-    // Interfering triangles are drawn last, on top of coplanar neighbours (depth test LessEqual).
+    // Interfering triangles are drawn last and without depth test: the contact is usually
+    // hidden between parts (a brake block inside the wheel), so it shows through them.
+    let solid_count = (verts.len() / 6) as u32;
     verts.extend_from_slice(&hot);
     let vertex_count = (verts.len() / 6) as u32;
     // Camera: three-quarter view from front-right and above, perspective framing the focus box.
@@ -101,29 +137,42 @@ pub fn render_png(
     let fov_y = 30f64.to_radians();
     let half = (fov_y / 2.0).tan().min((fov_y / 2.0).tan() * aspect);
     let dist = radius / half.atan().sin() * 1.05;
-    let dir = DVec3::new(0.9, -1.3, 0.8).normalize();
+    let dir = dir.normalize();
     let eye = dir * dist;
     let view = DMat4::look_at_rh(eye, DVec3::ZERO, DVec3::Z);
     let near = (dist - 2.0 * radius).max(dist * 0.02);
-    let far = dist + (everything.half_extents().length() + (everything.center() - center).length()) * 2.0 + radius;
+    let far = dist
+        + (everything.half_extents().length() + (everything.center() - center).length()) * 2.0
+        + radius;
     let proj = DMat4::perspective_rh(fov_y, aspect, near, far);
     let m: Mat4 = (proj * view).as_mat4();
-    let pixels = draw(&verts, vertex_count, m, width, height)?;
-    let file = std::fs::File::create(output).with_context(|| format!("cannot create {}", output.display()))?;
+    let pixels = draw(&verts, solid_count, vertex_count, m, width, height)?;
+    let file = std::fs::File::create(output)
+        .with_context(|| format!("cannot create {}", output.display()))?;
     let mut enc = png::Encoder::new(std::io::BufWriter::new(file), width, height);
     enc.set_color(png::ColorType::Rgba);
     enc.set_depth(png::BitDepth::Eight);
-    let mut w = enc.write_header().with_context(|| format!("cannot write {}", output.display()))?;
+    let mut w = enc
+        .write_header()
+        .with_context(|| format!("cannot write {}", output.display()))?;
     w.write_image_data(&pixels)
         .with_context(|| format!("cannot write {}", output.display()))?;
     Ok(())
 }
 
-fn draw(verts: &[f32], count: u32, m: Mat4, width: u32, height: u32) -> Result<Vec<u8>> {
+fn draw(
+    verts: &[f32],
+    solid_count: u32,
+    count: u32,
+    m: Mat4,
+    width: u32,
+    height: u32,
+) -> Result<Vec<u8>> {
     use wgpu::util::DeviceExt;
     let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
-    let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
-        .map_err(|e| anyhow!("no GPU adapter for rendering: {e}"))?;
+    let adapter =
+        pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
+            .map_err(|e| anyhow!("no GPU adapter for rendering: {e}"))?;
     let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
         label: Some("frcd render"),
         ..Default::default()
@@ -178,45 +227,49 @@ fn draw(verts: &[f32], count: u32, m: Mat4, width: u32, height: u32) -> Result<V
     });
     let color_format = wgpu::TextureFormat::Rgba8Unorm;
     let depth_format = wgpu::TextureFormat::Depth32Float;
-    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("frcd render"),
-        layout: Some(&layout),
-        vertex: wgpu::VertexState {
-            module: &shader,
-            entry_point: Some("vs"),
-            compilation_options: Default::default(),
-            buffers: &[Some(wgpu::VertexBufferLayout {
-                array_stride: 24,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3],
-            })],
-        },
-        primitive: wgpu::PrimitiveState {
-            topology: wgpu::PrimitiveTopology::TriangleList,
-            cull_mode: None,
-            ..Default::default()
-        },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: depth_format,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::LessEqual),
-            stencil: wgpu::StencilState::default(),
-            bias: wgpu::DepthBiasState::default(),
-        }),
-        multisample: wgpu::MultisampleState::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &shader,
-            entry_point: Some("fs"),
-            compilation_options: Default::default(),
-            targets: &[Some(wgpu::ColorTargetState {
-                format: color_format,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })],
-        }),
-        multiview_mask: None,
-        cache: None,
-    });
+    let make_pipeline = |compare: wgpu::CompareFunction| {
+        device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("frcd render"),
+            layout: Some(&layout),
+            vertex: wgpu::VertexState {
+                module: &shader,
+                entry_point: Some("vs"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: 24,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3],
+                })],
+            },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleList,
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: depth_format,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(compare),
+                stencil: wgpu::StencilState::default(),
+                bias: wgpu::DepthBiasState::default(),
+            }),
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &shader,
+                entry_point: Some("fs"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: color_format,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        })
+    };
+    let pipeline = make_pipeline(wgpu::CompareFunction::LessEqual);
+    let xray = make_pipeline(wgpu::CompareFunction::Always);
     let size = wgpu::Extent3d {
         width,
         height,
@@ -285,7 +338,11 @@ fn draw(verts: &[f32], count: u32, m: Mat4, width: u32, height: u32) -> Result<V
             pass.set_pipeline(&pipeline);
             pass.set_bind_group(0, &bg, &[]);
             pass.set_vertex_buffer(0, vbuf.slice(..));
-            pass.draw(0..count, 0..1);
+            pass.draw(0..solid_count, 0..1);
+            if count > solid_count {
+                pass.set_pipeline(&xray);
+                pass.draw(solid_count..count, 0..1);
+            }
         }
     }
     enc.copy_texture_to_buffer(

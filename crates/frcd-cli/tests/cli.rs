@@ -39,7 +39,12 @@ fn tempdir(name: &str) -> PathBuf {
 /// Two cubes; `b` moves through `a` along x: frames 0 and 4 apart, 1..=3 interfering
 /// (frame 2 deep), plus a small ball that sits inside `a` in frame 2 only.
 fn cube_scene(dir: &Path) -> PathBuf {
-    frcd_io::write_obj(dir.join("cube.obj"), &shapes::cuboid(DVec3::splat(0.5)), "cube").unwrap();
+    frcd_io::write_obj(
+        dir.join("cube.obj"),
+        &shapes::cuboid(DVec3::splat(0.5)),
+        "cube",
+    )
+    .unwrap();
     frcd_io::write_stl_binary(dir.join("ball.stl"), &shapes::icosphere(0.1, 1)).unwrap();
     let xs = [-2.0, -0.9, 0.2, 0.95, 2.0];
     let frames: Vec<String> = xs
@@ -73,7 +78,17 @@ fn check_writes_json_and_csv_reports() {
     cube_scene(&dir);
     for backend in ["cpu", "hybrid"] {
         let o = frcd(
-            &["check", "scene.json", "--backend", backend, "--json", "r.json", "--csv", "r.csv", "--segments"],
+            &[
+                "check",
+                "scene.json",
+                "--backend",
+                backend,
+                "--json",
+                "r.json",
+                "--csv",
+                "r.csv",
+                "--segments",
+            ],
             &dir,
         );
         assert!(o.status.success(), "{}", text(&o));
@@ -123,15 +138,40 @@ fn bad_input_fails_cleanly() {
     )
     .unwrap();
     assert_clean_failure(&frcd(&["check", "nomesh.json"], &dir), "nope.stl");
-    assert_clean_failure(&frcd(&["check", "scene.json", "--first", "99"], &dir), "--first 99");
     assert_clean_failure(
-        &frcd(&["check", "scene.json", "--backend", "image", "--mode", "exact"], &dir),
+        &frcd(&["check", "scene.json", "--first", "99"], &dir),
+        "--first 99",
+    );
+    assert_clean_failure(
+        &frcd(
+            &[
+                "check",
+                "scene.json",
+                "--backend",
+                "image",
+                "--mode",
+                "exact",
+            ],
+            &dir,
+        ),
         "fast",
     );
     std::fs::write(dir.join("cost.json"), "{\"threads\": \"two\"}").unwrap();
-    assert_clean_failure(&frcd(&["check", "scene.json", "--cost", "cost.json"], &dir), "cost.json");
-    assert_clean_failure(&frcd(&["check", "scene.json", "--backend", "nope"], &dir), "nope");
-    assert_clean_failure(&frcd(&["render", "scene.json", "--frame", "7", "-o", "x.png"], &dir), "--frame 7");
+    assert_clean_failure(
+        &frcd(&["check", "scene.json", "--cost", "cost.json"], &dir),
+        "cost.json",
+    );
+    assert_clean_failure(
+        &frcd(&["check", "scene.json", "--backend", "nope"], &dir),
+        "nope",
+    );
+    assert_clean_failure(
+        &frcd(
+            &["render", "scene.json", "--frame", "7", "-o", "x.png"],
+            &dir,
+        ),
+        "--frame 7",
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -139,14 +179,28 @@ fn bad_input_fails_cleanly() {
 fn calibrate_writes_a_loadable_model() {
     let dir = tempdir("calibrate");
     cube_scene(&dir);
-    let o = frcd(&["calibrate", "--cpu-only", "--repetitions", "1", "-o", "frcd-cost.json"], &dir);
+    let o = frcd(
+        &[
+            "calibrate",
+            "--cpu-only",
+            "--repetitions",
+            "1",
+            "-o",
+            "frcd-cost.json",
+        ],
+        &dir,
+    );
     assert!(o.status.success(), "{}", text(&o));
     let m = frcd_hybrid::CostModel::load(dir.join("frcd-cost.json")).unwrap();
     assert!(m.cpu_narrow_ns_per_triangle > 0.0 && m.gpu_narrow_us.is_none());
     // The default model file in the working directory is picked up by check.
     let o = frcd(&["check", "scene.json", "--quiet"], &dir);
     assert!(o.status.success(), "{}", text(&o));
-    assert!(String::from_utf8_lossy(&o.stdout).contains("cost model frcd-cost.json"), "{}", text(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("cost model frcd-cost.json"),
+        "{}",
+        text(&o)
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -154,7 +208,10 @@ fn calibrate_writes_a_loadable_model() {
 fn bench_prints_a_row_per_backend() {
     let dir = tempdir("bench");
     cube_scene(&dir);
-    let o = frcd(&["bench", "scene.json", "--frames", "5", "--json", "b.json"], &dir);
+    let o = frcd(
+        &["bench", "scene.json", "--frames", "5", "--json", "b.json"],
+        &dir,
+    );
     assert!(o.status.success(), "{}", text(&o));
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("b.json")).unwrap()).unwrap();
@@ -174,9 +231,26 @@ fn bench_prints_a_row_per_backend() {
 fn render_writes_a_png() {
     let dir = tempdir("render");
     cube_scene(&dir);
-    let o = frcd(&["render", "scene.json", "--frame", "2", "-o", "f.png", "--width", "320", "--height", "200"], &dir);
+    let o = frcd(
+        &[
+            "render",
+            "scene.json",
+            "--frame",
+            "2",
+            "-o",
+            "f.png",
+            "--width",
+            "320",
+            "--height",
+            "200",
+        ],
+        &dir,
+    );
     let t = text(&o);
-    if !o.status.success() && t.contains("no GPU adapter") && std::env::var("FRCD_REQUIRE_GPU").as_deref() != Ok("1") {
+    if !o.status.success()
+        && t.contains("no GPU adapter")
+        && std::env::var("FRCD_REQUIRE_GPU").as_deref() != Ok("1")
+    {
         println!("SKIP render_writes_a_png: no GPU adapter");
         return;
     }
@@ -194,5 +268,41 @@ fn render_writes_a_png() {
         .filter(|p| p[0] > 150 && p[1] < 60 && p[2] < 60)
         .count();
     assert!(red > 0, "no highlighted pixel");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The demo: `frcd check testdata/bogie/scene.json` reports exactly the schedule the generator
+/// computed with the exact oracle (`expected_interference.json`).
+#[test]
+fn bogie_demo_matches_the_expected_schedule() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let scene = root.join("testdata/bogie/scene.json");
+    let expected = root.join("testdata/bogie/expected_interference.json");
+    if !scene.exists() || !expected.exists() {
+        println!(
+            "SKIP bogie demo: {} not found (cargo xtask gen-bogie)",
+            scene.display()
+        );
+        return;
+    }
+    let dir = tempdir("bogie");
+    let out = dir.join("bogie.json");
+    let o = frcd(
+        &[
+            "check",
+            scene.to_str().unwrap(),
+            "--backend",
+            "cpu",
+            "--quiet",
+            "--json",
+            out.to_str().unwrap(),
+        ],
+        &dir,
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let got = frcd_io::Report::read_json(&out).unwrap();
+    let want = frcd_io::Report::read_json(&expected).unwrap();
+    assert!(!want.pairs.is_empty());
+    assert_eq!(got.pairs, want.pairs);
     std::fs::remove_dir_all(&dir).ok();
 }

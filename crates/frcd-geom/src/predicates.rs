@@ -121,10 +121,7 @@ pub fn orient2d_filter(a: DVec2, b: DVec2, c: DVec2) -> (f64, f64) {
     if m.is_nan() || m > FILTER_MAX {
         return (det, f64::INFINITY);
     }
-    (
-        det,
-        O2D_ERRBOUND_A * (l.abs() + r.abs()) + UNDERFLOW_SLACK,
-    )
+    (det, O2D_ERRBOUND_A * (l.abs() + r.abs()) + UNDERFLOW_SLACK)
 }
 
 /// Sign of `(b-a)×(c-a)` in 2D, exactly, as `-1`, `0` or `1` (positive: counter-clockwise).

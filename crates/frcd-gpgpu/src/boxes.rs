@@ -73,29 +73,13 @@ impl BoxScratch {
         };
         if !reuse {
             let body_cap = bodies.next_power_of_two().max(64);
-            let max = ctx.max_storage_bytes();
-            for (what, bytes) in [
+            ctx.check_storage(&[
                 ("body boxes", body_cap as u64 * 64),
                 ("body pairs", self.output_cap as u64 * 8),
-            ] {
-                if bytes > max {
-                    return Err(GpuError::CapacityExceeded {
-                        what,
-                        needed: bytes,
-                        limit: max,
-                    });
-                }
-            }
+            ])?;
             use wgpu::BufferUsages as B;
             let d = &ctx.device;
-            let buf = |label: &str, size: u64, usage: B| {
-                d.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some(label),
-                    size,
-                    usage,
-                    mapped_at_creation: false,
-                })
-            };
+            let buf = |label: &str, size: u64, usage: B| ctx.buffer(label, size, usage);
             let osize = self.output_cap as u64 * 8;
             let boxes = buf(
                 "frcd-gpgpu body boxes",

@@ -289,6 +289,29 @@ impl GpuContext {
             .max_storage_buffer_binding_size
             .min(self.limits.max_buffer_size)
     }
+
+    /// Checks that every named storage buffer fits the device's binding limit.
+    pub(crate) fn check_storage(&self, sizes: &[(&'static str, u64)]) -> Result<(), GpuError> {
+        let limit = self.max_storage_bytes();
+        match sizes.iter().find(|(_, bytes)| *bytes > limit) {
+            Some(&(what, needed)) => Err(GpuError::CapacityExceeded {
+                what,
+                needed,
+                limit,
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// An unmapped buffer.
+    pub(crate) fn buffer(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size,
+            usage,
+            mapped_at_creation: false,
+        })
+    }
 }
 
 /// A whole-buffer bind group entry.

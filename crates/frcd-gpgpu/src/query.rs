@@ -108,7 +108,6 @@ impl QueryScratch {
                 return Ok(());
             }
         }
-        let max = ctx.max_storage_bytes();
         // A level dispatches ceil(n / 64) workgroups as an x × y grid.
         let groups = ctx.limits.max_compute_workgroups_per_dimension as u64;
         let dispatchable = crate::context::WG as u64 * groups * groups;
@@ -119,28 +118,13 @@ impl QueryScratch {
                 limit: dispatchable,
             });
         }
-        for (what, bytes) in [
+        ctx.check_storage(&[
             ("frontier", self.frontier_cap as u64 * 8),
             ("output", self.output_cap as u64 * 8),
-        ] {
-            if bytes > max {
-                return Err(GpuError::CapacityExceeded {
-                    what,
-                    needed: bytes,
-                    limit: max,
-                });
-            }
-        }
-        let d = &ctx.device;
+        ])?;
         use wgpu::BufferUsages as B;
-        let buf = |label: &str, size: u64, usage: B| {
-            d.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                usage,
-                mapped_at_creation: false,
-            })
-        };
+        let d = &ctx.device;
+        let buf = |label: &str, size: u64, usage: B| ctx.buffer(label, size, usage);
         let fsize = self.frontier_cap as u64 * 8;
         let osize = self.output_cap as u64 * 8;
         let frontier = [

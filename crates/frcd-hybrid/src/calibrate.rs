@@ -136,7 +136,13 @@ pub fn measure(options: &CalibrateOptions) -> CostModel {
 }
 
 #[cfg(feature = "gpgpu")]
-fn gpgpu_figures(model: &mut CostModel, reps: usize, boxes: &[Aabb], tree: &ObbTree, poses: &[Pose]) {
+fn gpgpu_figures(
+    model: &mut CostModel,
+    reps: usize,
+    boxes: &[Aabb],
+    tree: &ObbTree,
+    poses: &[Pose],
+) {
     use frcd_gpgpu::{BoxScratch, GpuContext, QueryScratch};
     let Ok(ctx) = GpuContext::headless() else {
         return;
@@ -170,8 +176,10 @@ fn gpgpu_figures(model: &mut CostModel, reps: usize, boxes: &[Aabb], tree: &ObbT
     };
     let mut qs = QueryScratch::default();
     let near = Pose::from_translation(DVec3::new(0.5, 0.2, 0.1));
-    let Some(fixed) = time(&mut || ctx.collide(&gc, &Pose::IDENTITY, &gc, &near, &mut qs).is_ok())
-    else {
+    let Some(fixed) = time(&mut || {
+        ctx.collide(&gc, &Pose::IDENTITY, &gc, &near, &mut qs)
+            .is_ok()
+    }) else {
         return;
     };
     let Some(heavy) = time(&mut || {
@@ -207,7 +215,10 @@ fn image_figures(model: &mut CostModel, reps: usize, mesh: &TriMesh, poses: &[Po
     for _ in 0..reps {
         let t = Instant::now();
         for p in poses {
-            if det.query(&mut scratch, &g, &Pose::IDENTITY, &g, p, &opts).is_err() {
+            if det
+                .query(&mut scratch, &g, &Pose::IDENTITY, &g, p, &opts)
+                .is_err()
+            {
                 return;
             }
         }

@@ -118,9 +118,15 @@ impl CostModel {
             ("cpu_broad_ns_per_body", Some(self.cpu_broad_ns_per_body)),
             ("gpu_broad_us", self.gpu_broad_us),
             ("gpu_broad_ns_per_pair", self.gpu_broad_ns_per_pair),
-            ("cpu_narrow_ns_per_triangle", Some(self.cpu_narrow_ns_per_triangle)),
+            (
+                "cpu_narrow_ns_per_triangle",
+                Some(self.cpu_narrow_ns_per_triangle),
+            ),
             ("gpu_narrow_us", self.gpu_narrow_us),
-            ("gpu_narrow_ns_per_triangle", self.gpu_narrow_ns_per_triangle),
+            (
+                "gpu_narrow_ns_per_triangle",
+                self.gpu_narrow_ns_per_triangle,
+            ),
             ("image_us", self.image_us),
             ("threads", Some(self.threads as f64)),
         ];
@@ -202,7 +208,9 @@ mod tests {
     #[test]
     fn thresholds_follow_the_figures() {
         let m = CostModel::default();
-        let n = m.gpu_broad_min_bodies().expect("large scenes favour the GPU");
+        let n = m
+            .gpu_broad_min_bodies()
+            .expect("large scenes favour the GPU");
         assert!(n > 100, "{n}");
         assert!(!m.prefer_gpu_narrow(100));
         let t = m.gpu_narrow_min_triangles().expect("threshold");
@@ -221,7 +229,10 @@ mod tests {
         m.save(&p).unwrap();
         assert_eq!(CostModel::load(&p).unwrap(), m);
         std::fs::write(&p, "{\"threads\": 2}").unwrap();
-        assert!(matches!(CostModel::load(&p), Err(CostModelError::Json { .. })));
+        assert!(matches!(
+            CostModel::load(&p),
+            Err(CostModelError::Json { .. })
+        ));
         let mut bad = m.clone();
         bad.cpu_narrow_ns_per_triangle = -1.0;
         bad.save(&p).unwrap();

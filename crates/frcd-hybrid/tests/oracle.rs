@@ -67,12 +67,22 @@ fn scene(seed: u64, n: usize, frames: usize, with_open: bool) -> GenScene {
     pos[1] = pos[0] + DVec3::new(0.1, 0.0, 0.0);
     let axes: Vec<DVec3> = (0..n)
         .map(|_| {
-            DVec3::new(rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5, rng.random::<f64>() + 0.1)
-                .normalize()
+            DVec3::new(
+                rng.random::<f64>() - 0.5,
+                rng.random::<f64>() - 0.5,
+                rng.random::<f64>() + 0.1,
+            )
+            .normalize()
         })
         .collect();
     let vel: Vec<DVec3> = (0..n)
-        .map(|_| DVec3::new(rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5) * 0.15)
+        .map(|_| {
+            DVec3::new(
+                rng.random::<f64>() - 0.5,
+                rng.random::<f64>() - 0.5,
+                rng.random::<f64>() - 0.5,
+            ) * 0.15
+        })
         .collect();
     let mut out = Vec::new();
     for f in 0..frames {
@@ -82,7 +92,10 @@ fn scene(seed: u64, n: usize, frames: usize, with_open: bool) -> GenScene {
                     Pose::from_translation(pos[i])
                 } else {
                     let t = pos[i] + vel[i] * f as f64 * if i == 1 { 8.0 } else { 1.0 };
-                    Pose::new(t, DQuat::from_axis_angle(axes[i], 0.3 * f as f64 + i as f64))
+                    Pose::new(
+                        t,
+                        DQuat::from_axis_angle(axes[i], 0.3 * f as f64 + i as f64),
+                    )
                 }
             })
             .collect();
@@ -106,7 +119,13 @@ fn truth(s: &GenScene, poses: &[Pose]) -> Truth {
             if (s.bodies[a].is_static && s.bodies[b].is_static) || s.exclude.contains(&(a, b)) {
                 continue;
             }
-            let ans = oracle::answer(&s.bodies[a].mesh, &poses[a], &s.bodies[b].mesh, &poses[b], true);
+            let ans = oracle::answer(
+                &s.bodies[a].mesh,
+                &poses[a],
+                &s.bodies[b].mesh,
+                &poses[b],
+                true,
+            );
             if ans.collide() {
                 out.push((a, b, ans.pairs, ans.contained.is_some()));
             }
@@ -147,8 +166,14 @@ fn exact_cpu_equals_oracle() {
         };
         let (want, got, _) = run(&s, options).expect("cpu never fails");
         let hits: usize = want.iter().map(Vec::len).sum();
-        assert!(hits > 10, "scene {seed} has too few interferences ({hits}) to test much");
-        assert!(want[0].iter().any(|t| t.0 == 0 && t.1 == 1 && t.3), "containment case present");
+        assert!(
+            hits > 10,
+            "scene {seed} has too few interferences ({hits}) to test much"
+        );
+        assert!(
+            want[0].iter().any(|t| t.0 == 0 && t.1 == 1 && t.3),
+            "containment case present"
+        );
         assert_eq!(want, got, "seed {seed}");
     }
 }
@@ -185,7 +210,9 @@ fn segments_match_pairs() {
         },
     )
     .unwrap();
-    let r = checker.check(&s.frames[1], &mut FrameState::default()).unwrap();
+    let r = checker
+        .check(&s.frames[1], &mut FrameState::default())
+        .unwrap();
     assert!(!r.contacts.is_empty());
     for c in &r.contacts {
         assert_eq!(c.segments.len(), c.pairs.len());
@@ -207,7 +234,10 @@ fn nothing_runs_without_box_overlap() {
         .map(|i| Pose::from_translation(DVec3::new(3.0 * i as f64, 0.0, 0.0)))
         .collect();
     let checker = Checker::new(bodies, &[], Options::default()).unwrap();
-    assert!(!checker.has_gpgpu() && !checker.has_image(), "a 5-body scene needs no GPU");
+    assert!(
+        !checker.has_gpgpu() && !checker.has_image(),
+        "a 5-body scene needs no GPU"
+    );
     let r = checker.check(&poses, &mut FrameState::default()).unwrap();
     assert_eq!(r.rcs, 0);
     assert!(r.contacts.is_empty());
@@ -231,14 +261,20 @@ fn bad_input_is_a_typed_error() {
     };
     let e = Checker::new(s.bodies.clone(), &[], fast_image_exact).unwrap_err();
     assert!(
-        matches!(e, HybridError::ImageNeedsFast | HybridError::FeatureDisabled { .. }),
+        matches!(
+            e,
+            HybridError::ImageNeedsFast | HybridError::FeatureDisabled { .. }
+        ),
         "{e}"
     );
     let checker = Checker::new(s.bodies.clone(), &[], Options::default()).unwrap();
     let mut st = FrameState::default();
     assert!(matches!(
         checker.check(&s.frames[0][..3], &mut st),
-        Err(HybridError::PoseCount { expected: 6, got: 3 })
+        Err(HybridError::PoseCount {
+            expected: 6,
+            got: 3
+        })
     ));
     let mut poses = s.frames[0].clone();
     poses[4].translation.y = f64::NAN;
@@ -247,7 +283,6 @@ fn bad_input_is_a_typed_error() {
 }
 
 /// GPU backends on the software adapter; SKIP without an adapter unless FRCD_REQUIRE_GPU=1.
-#[cfg(feature = "gpgpu")]
 #[test]
 fn exact_gpgpu_and_gpu_heavy_hybrid_equal_oracle() {
     let s = scene(7, 20, 3, true);
@@ -256,6 +291,21 @@ fn exact_gpgpu_and_gpu_heavy_hybrid_equal_oracle() {
         gpu: GpuPolicy::Require,
         ..Options::default()
     };
+    if !cfg!(feature = "gpgpu") {
+        let e = Checker::new(s.bodies.clone(), &s.exclude, forced).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                HybridError::FeatureDisabled {
+                    feature: "gpgpu",
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        println!("SKIP exact_gpgpu: built without the 'gpgpu' feature");
+        return;
+    }
     let (want, got, checker) = match run(&s, forced) {
         Err(HybridError::Gpu { message, .. }) if !gpu_required() => {
             println!("SKIP exact_gpgpu: no GPU adapter ({message})");
@@ -294,7 +344,6 @@ fn exact_gpgpu_and_gpu_heavy_hybrid_equal_oracle() {
 }
 
 /// Fast mode: everything reported is true; deep interference is found.
-#[cfg(feature = "image")]
 #[test]
 fn fast_mode_reports_only_true_interference() {
     let s = scene(8, 16, 3, true);
@@ -304,6 +353,21 @@ fn fast_mode_reports_only_true_interference() {
         gpu: GpuPolicy::Require,
         ..Options::default()
     };
+    if !cfg!(feature = "image") {
+        let e = Checker::new(s.bodies.clone(), &s.exclude, options).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                HybridError::FeatureDisabled {
+                    feature: "image",
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        println!("SKIP fast_mode: built without the 'image' feature");
+        return;
+    }
     let (want, got, checker) = match run(&s, options) {
         Err(HybridError::Gpu { message, .. }) if !gpu_required() => {
             println!("SKIP fast_mode: no GPU adapter ({message})");
@@ -312,13 +376,24 @@ fn fast_mode_reports_only_true_interference() {
         other => other.expect("image backend"),
     };
     assert!(checker.has_image());
+    let r0 = checker
+        .check(&s.frames[0], &mut FrameState::default())
+        .unwrap();
+    assert_eq!(
+        r0.stages[1].backend,
+        StageBackend::Gpu,
+        "the image stage ran"
+    );
+    assert!(r0.acs_triangles > 0);
     let mut found = 0;
     for (w, g) in want.iter().zip(&got) {
         for (a, b, pairs, contained) in g {
             let t = w
                 .iter()
                 .find(|t| t.0 == *a && t.1 == *b)
-                .unwrap_or_else(|| panic!("fast mode reported ({a}, {b}) which does not interfere"));
+                .unwrap_or_else(|| {
+                    panic!("fast mode reported ({a}, {b}) which does not interfere")
+                });
             assert!(pairs.iter().all(|p| t.2.binary_search(p).is_ok()));
             if *contained {
                 assert!(t.3);
@@ -327,7 +402,10 @@ fn fast_mode_reports_only_true_interference() {
         }
     }
     let total: usize = want.iter().map(Vec::len).sum();
-    assert!(found * 2 >= total, "fast mode found only {found} of {total}");
+    assert!(
+        found * 2 >= total,
+        "fast mode found only {found} of {total}"
+    );
     // The deep containment case (small sphere inside the big one) is found in frame 0.
     assert!(got[0].iter().any(|t| t.0 == 0 && t.1 == 1));
 }

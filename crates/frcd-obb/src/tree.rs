@@ -1,5 +1,5 @@
 use frcd_geom::fit::{FitMethod, fit_obb};
-use frcd_geom::{Aabb, DVec3, Obb, Sphere, TriMesh, Triangle};
+use frcd_geom::{Aabb, DMat3, DVec3, Obb, Sphere, TriMesh, Triangle};
 
 /// One node of an [`ObbTree`], in a flat array in depth-first order.
 ///
@@ -32,8 +32,9 @@ static NEXT_UID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::ne
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct BuildOptions {
-    /// Rule choosing each node's box axes. The default is the rule that gave the fastest queries
-    /// in `benches/benches/obb.rs` (see the crate README).
+    /// Rule choosing each node's box axes. The default, [`FitMethod::VertexCovariance`], gave the
+    /// fastest all-pairs queries and the fastest build in `benches/benches/obb.rs` (`obb/fit`,
+    /// `obb/build`; see the crate README).
     pub fit: FitMethod,
     /// Most triangles in a leaf (a node with at most this many triangles becomes a leaf).
     /// `0` is treated as `1`.
@@ -84,7 +85,9 @@ impl ObbTree {
     /// Builds the tree: each node's box is fitted with `options.fit`; a node is split by the
     /// plane through the mean of its triangles' centroids, across its box's major axis (the
     /// other two axes are tried when one side would be empty, and the list is halved when all
-    /// three fail); nodes with at most `options.max_leaf_triangles` triangles become leaves.
+    /// three fail); nodes with at most `options.max_leaf_triangles` triangles become leaves. A
+    /// one-triangle leaf gets the triangle's own frame (longest edge, normal): a flat box, the
+    /// tightest there is, whatever the fit rule.
     /// `O(n log n)` for balanced splits; an explicit stack keeps degenerate inputs off the call
     /// stack.
     pub fn build(mesh: &TriMesh, options: &BuildOptions) -> ObbTree {
@@ -103,8 +106,11 @@ impl ObbTree {
             if parent != u32::MAX {
                 nodes[parent as usize].right = index;
             }
-            let obb = fit_obb(&perm[lo..hi], options.fit);
             if hi - lo <= leaf {
+                let obb = match &perm[lo..hi] {
+                    [t] => triangle_obb(t).unwrap_or_else(|| fit_obb(&perm[lo..hi], options.fit)),
+                    tris => fit_obb(tris, options.fit),
+                };
                 nodes.push(Node {
                     obb,
                     right: 0,
@@ -113,6 +119,7 @@ impl ObbTree {
                 });
                 continue;
             }
+            let obb = fit_obb(&perm[lo..hi], options.fit);
             let mid = split(
                 &obb,
                 &mut order[lo..hi],
@@ -244,6 +251,24 @@ impl ObbTree {
         }
         best
     }
+}
+
+/// The box of one triangle in its own frame (longest edge, in-plane normal to it, normal):
+/// flat and tight whatever the fit rule. `None` for a triangle without a usable normal.
+fn triangle_obb(t: &Triangle) -> Option<Obb> {
+    let e = [t.v[1] - t.v[0], t.v[2] - t.v[1], t.v[0] - t.v[2]];
+    let longest = e
+        .iter()
+        .copied()
+        .max_by(|a, b| a.length_squared().total_cmp(&b.length_squared()))?;
+    let x = longest.normalize_or_zero();
+    let n = t.normal().normalize_or_zero();
+    let z = (n - x * x.dot(n)).normalize_or_zero();
+    if x == DVec3::ZERO || z == DVec3::ZERO || !(x.is_finite() && z.is_finite()) {
+        return None;
+    }
+    let y = z.cross(x);
+    Some(Obb::from_points_with_axes(&t.v, DMat3::from_cols(x, y, z)))
 }
 
 /// Partitions a node's triangles; returns the size of the left part (in `1..len`).

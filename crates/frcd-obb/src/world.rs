@@ -115,8 +115,10 @@ struct PairState {
 /// use std::sync::Arc;
 /// let ball = Arc::new(ObbTree::build(&shapes::icosphere(1.0, 2), &BuildOptions::default()));
 /// let mut world = World::new(WorldOptions::default());
-/// let a = world.add_body(ball.clone(), Pose::IDENTITY, true);
-/// let b = world.add_body(ball, Pose::from_translation(DVec3::new(5.0, 0.0, 0.0)), false);
+/// let a = world.add_body(ball.clone(), Pose::IDENTITY, true).unwrap();
+/// let b = world
+///     .add_body(ball, Pose::from_translation(DVec3::new(5.0, 0.0, 0.0)), false)
+///     .unwrap();
 /// assert!(world.step().contacts.is_empty());
 /// world.set_pose(b, Pose::from_translation(DVec3::new(1.5, 0.0, 0.0))).unwrap();
 /// let report = world.step();
@@ -162,16 +164,9 @@ impl World {
         self.bodies.is_empty()
     }
 
-    /// Adds a body. Static bodies are never tested against each other. A pose that is not
-    /// finite is replaced by... nothing: it is refused by [`World::try_add_body`]; this one
-    /// panics on it only in debug builds' `debug_assert`, use `try_add_body` for user input.
-    pub fn add_body(&mut self, tree: Arc<ObbTree>, pose: Pose, is_static: bool) -> BodyId {
-        self.try_add_body(tree, pose, is_static)
-            .unwrap_or_else(|e| panic!("World::add_body: {e}"))
-    }
-
-    /// Adds a body, refusing an invalid pose.
-    pub fn try_add_body(
+    /// Adds a body; static bodies are never tested against each other. An invalid pose
+    /// (non-finite, or a rotation that is not a unit quaternion) is refused.
+    pub fn add_body(
         &mut self,
         tree: Arc<ObbTree>,
         pose: Pose,

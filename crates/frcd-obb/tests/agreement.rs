@@ -331,7 +331,7 @@ fn scatter_world(threads: usize, steps: usize) -> Vec<frcd_obb::StepReport> {
             bar.clone()
         };
         let pose = random_pose(&mut rng, 8.0);
-        ids.push(world.add_body(tree, pose, i % 7 == 0));
+        ids.push(world.add_body(tree, pose, i % 7 == 0).unwrap());
     }
     world.exclude_pair(ids[1], ids[3]).unwrap();
     let pool = rayon::ThreadPoolBuilder::new()
@@ -409,13 +409,13 @@ fn world_refuses_bad_input() {
         &shapes::cuboid(DVec3::ONE),
         &BuildOptions::default(),
     ));
-    let id = world.add_body(t.clone(), Pose::IDENTITY, false);
+    let id = world.add_body(t.clone(), Pose::IDENTITY, false).unwrap();
     let bad = Pose {
         translation: DVec3::new(f64::NAN, 0.0, 0.0),
         rotation: DQuat::IDENTITY,
     };
     assert!(world.set_pose(id, bad).is_err());
-    assert!(world.try_add_body(t, bad, false).is_err());
+    assert!(world.add_body(t, bad, false).is_err());
     assert!(world.set_pose(frcd_obb::BodyId(9), Pose::IDENTITY).is_err());
     assert!(world.exclude_pair(id, frcd_obb::BodyId(4)).is_err());
 }
