@@ -372,6 +372,40 @@ fn stored_scenes(steps: usize) -> Result<Option<Vec<Scene>>> {
     Ok(Some(out))
 }
 
+/// The bogie demo (`testdata/bogie/scene.json`, written by `cargo xtask gen-bogie`) on a sample
+/// of its 2,001 frames: every 100th, plus the first and last frame of each interference interval
+/// and the frames around them, so every backend sees each interference start and end.
+fn demo_scene() -> Result<Scene> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../testdata/bogie/scene.json");
+    let loaded = frcd_io::Scene::load(&path)?;
+    let n = loaded.frames().len();
+    let mut picks: Vec<usize> = (0..n).step_by(100).collect();
+    for edge in [
+        69usize, 263, 521, 635, 761, 766, 1080, 1118, 1228, 1229, 1539, 1817,
+    ] {
+        picks.extend([edge.saturating_sub(1), edge, edge + 1]);
+    }
+    picks.retain(|&f| f < n);
+    picks.sort_unstable();
+    picks.dedup();
+    Ok(Scene {
+        name: "demo/bogie".into(),
+        bodies: loaded
+            .bodies()
+            .iter()
+            .map(|b| scenes::Body {
+                name: b.name.clone(),
+                mesh: b.mesh.clone(),
+                is_static: b.is_static,
+            })
+            .collect(),
+        frames: picks
+            .iter()
+            .map(|&f| loaded.frames()[f].poses.clone())
+            .collect(),
+    })
+}
+
 /// Runs the task.
 pub fn run(args: &[String]) -> Result<()> {
     let mut scene_filter: Option<String> = None;
@@ -391,6 +425,7 @@ pub fn run(args: &[String]) -> Result<()> {
         }
     }
     let mut all = scenes::verify_set();
+    all.push(demo_scene()?);
     if stored {
         match stored_scenes(12)? {
             Some(s) => all.extend(s),
