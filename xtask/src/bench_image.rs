@@ -253,34 +253,24 @@ pub fn run(args: &[String]) -> Result<()> {
             pixel_size: r.bounds.pixel_size,
             depth_bound: r.bounds.depth,
         });
-        let missed = bench.largest_missed(&g_cube, &g_cube, &corner_at, res)?;
-        let (ms, r) = bench.time(&g_cube, &g_cube, &corner_at(0.01), res)?;
-        rows.push(Row {
-            scene: "corner",
-            resolution: res,
-            pixels: (r.image.width, r.image.height),
-            layers: r.layers,
-            ms,
-            volume_error: None,
-            volume_estimate: None,
-            missed: Some(missed.unwrap_or(0.0)),
-            pixel_size: r.bounds.pixel_size,
-            depth_bound: r.bounds.depth,
-        });
-        let missed = bench.largest_missed(&g_cube, &g_cube, &edge_at, res)?;
-        let (ms, r) = bench.time(&g_cube, &g_cube, &edge_at(0.01), res)?;
-        rows.push(Row {
-            scene: "edge",
-            resolution: res,
-            pixels: (r.image.width, r.image.height),
-            layers: r.layers,
-            ms,
-            volume_error: None,
-            volume_estimate: None,
-            missed: Some(missed.unwrap_or(0.0)),
-            pixel_size: r.bounds.pixel_size,
-            depth_bound: r.bounds.depth,
-        });
+        let scans: [(&'static str, &dyn Fn(f64) -> Pose); 2] =
+            [("corner", &corner_at), ("edge", &edge_at)];
+        for (scene, at) in scans {
+            let missed = bench.largest_missed(&g_cube, &g_cube, at, res)?;
+            let (ms, r) = bench.time(&g_cube, &g_cube, &at(0.01), res)?;
+            rows.push(Row {
+                scene,
+                resolution: res,
+                pixels: (r.image.width, r.image.height),
+                layers: r.layers,
+                ms,
+                volume_error: None,
+                volume_estimate: None,
+                missed: Some(missed.unwrap_or(0.0)),
+                pixel_size: r.bounds.pixel_size,
+                depth_bound: r.bounds.depth,
+            });
+        }
         for row in &rows[rows.len() - 4..] {
             println!("{}", table_line(row));
         }
