@@ -221,15 +221,24 @@ impl Obb {
     /// assert!(obb.contains_point(pts[1]));
     /// ```
     pub fn from_points_with_axes(points: &[DVec3], axes: DMat3) -> Self {
+        Self::from_point_iter_with_axes(points.iter().copied(), axes)
+    }
+
+    /// [`Obb::from_points_with_axes`] over any sequence of points, in one pass.
+    pub fn from_point_iter_with_axes(points: impl Iterator<Item = DVec3>, axes: DMat3) -> Self {
         let t = axes.transpose();
         let mut lo = DVec3::splat(f64::INFINITY);
         let mut hi = DVec3::splat(f64::NEG_INFINITY);
-        for &p in points {
+        let mut point_mag = 0.0f64;
+        let mut any = false;
+        for p in points {
             let q = t * p;
             lo = lo.min(q);
             hi = hi.max(q);
+            point_mag = point_mag.max(p.abs().element_sum());
+            any = true;
         }
-        if points.is_empty() {
+        if !any {
             return Self {
                 center: DVec3::ZERO,
                 axes,
@@ -241,11 +250,7 @@ impl Obb {
         // Rounding of the projections (each ≤ 3 ulp of |p|₁ for unit axes), of the centre
         // reconstruction and of the containment test's own projection: a few ulp of the largest
         // point magnitude, generously.
-        let mag = points
-            .iter()
-            .map(|p| p.abs().element_sum())
-            .fold(0.0f64, f64::max)
-            .max(lo.abs().max(hi.abs()).max_element());
+        let mag = point_mag.max(lo.abs().max(hi.abs()).max_element());
         let slack = mag * (32.0 * f64::EPSILON);
         Self {
             center: axes * mid,

@@ -42,13 +42,15 @@ pub enum FitMethod {
 /// assert!((obb.volume() - 12.0).abs() < 1e-9);
 /// ```
 pub fn fit_obb(triangles: &[Triangle], method: FitMethod) -> Obb {
-    let points: Vec<DVec3> = triangles.iter().flat_map(|t| t.v).collect();
+    // Streamed, not collected: tree builds call this once per node, and copying every node's
+    // vertices into a fresh Vec cost more than the fit itself.
+    let points = || triangles.iter().flat_map(|t| t.v);
     let axes = match method {
-        FitMethod::VertexCovariance => vertex_covariance_axes(&points),
+        FitMethod::VertexCovariance => covariance_axes_of(points()),
         FitMethod::AreaWeighted => area_weighted_axes(triangles),
-        FitMethod::HullSurface => hull_surface_axes(&points),
+        FitMethod::HullSurface => hull_surface_axes(&points().collect::<Vec<_>>()),
     };
-    Obb::from_points_with_axes(&points, axes)
+    Obb::from_point_iter_with_axes(points(), axes)
 }
 
 /// A reference point for conditioning: the centre of the points' bounding box (`ZERO` for none).
@@ -130,15 +132,23 @@ pub fn hull_surface_axes(points: &[DVec3]) -> DMat3 {
 /// Eigenvectors of the vertex covariance, as a right-handed orthonormal basis sorted by
 /// decreasing eigenvalue (column 0 is the major axis).
 pub fn vertex_covariance_axes(points: &[DVec3]) -> DMat3 {
-    if points.is_empty() {
+    covariance_axes_of(points.iter().copied())
+}
+
+/// [`vertex_covariance_axes`] over any re-iterable sequence of points (two passes).
+fn covariance_axes_of(points: impl Iterator<Item = DVec3> + Clone) -> DMat3 {
+    let (sum, count) = points
+        .clone()
+        .fold((DVec3::ZERO, 0usize), |(s, c), p| (s + p, c + 1));
+    if count == 0 {
         return DMat3::IDENTITY;
     }
     // Centre first: the covariance of shifted data is better conditioned at large offsets.
-    let n = points.len() as f64;
-    let mean = points.iter().copied().sum::<DVec3>() / n;
+    let n = count as f64;
+    let mean = sum / n;
     let mut c = [[0.0f64; 3]; 3];
     for p in points {
-        let d = (*p - mean).to_array();
+        let d = (p - mean).to_array();
         for i in 0..3 {
             for j in i..3 {
                 c[i][j] += d[i] * d[j];
