@@ -184,6 +184,44 @@ impl ObbTree {
     pub fn component_points(&self) -> &[DVec3] {
         &self.component_points
     }
+    // --- Crate-internal view of the hierarchy -------------------------------------------------
+    // Queries other than the collision traversal (distance, tolerance) walk the tree only through
+    // these five functions, so the node layout can change (wider nodes, relative or f32 boxes)
+    // without touching them. Keep their meaning when the layout changes.
+
+    /// The root node's id.
+    #[allow(dead_code)]
+    pub(crate) fn root_node(&self) -> u32 {
+        0
+    }
+    /// A node's box in the mesh's local frame, in f64, containing every triangle below it.
+    #[allow(dead_code)]
+    pub(crate) fn node_obb(&self, node: u32) -> Obb {
+        self.nodes[node as usize].obb
+    }
+    /// The children of an internal node (none for a leaf).
+    #[allow(dead_code)]
+    pub(crate) fn node_children(&self, node: u32) -> impl Iterator<Item = u32> + '_ {
+        let n = &self.nodes[node as usize];
+        let kids = if n.is_leaf() {
+            [0, 0]
+        } else {
+            [node + 1, n.right]
+        };
+        kids.into_iter().take(if n.is_leaf() { 0 } else { 2 })
+    }
+    /// The input-mesh triangle indices of a leaf (empty for an internal node).
+    #[allow(dead_code)]
+    pub(crate) fn node_triangles(&self, node: u32) -> &[u32] {
+        let n = &self.nodes[node as usize];
+        &self.order[n.first as usize..(n.first + n.count) as usize]
+    }
+    /// Triangle `tri` (input-mesh index) in the mesh's local frame.
+    #[allow(dead_code)]
+    pub(crate) fn triangle(&self, tri: u32) -> Triangle {
+        self.triangles[tri as usize]
+    }
+
     /// Triangles sharing a vertex with triangle `t` (itself included).
     pub(crate) fn neighbours(&self, t: u32) -> &[u32] {
         let (offsets, ids) = self.neighbours.get_or_init(|| {
