@@ -1,3 +1,4 @@
+#![forbid(unsafe_code)]
 //! `frcd`: interference checking of an assembly along a trajectory.
 //!
 //! - `frcd check SCENE [--backend cpu|gpgpu|image|hybrid] [--mode exact|fast] [--json OUT]

@@ -5,6 +5,7 @@ use std::sync::OnceLock;
 
 /// Why a mesh was refused. Each variant names the offending element.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
 pub enum MeshError {
     /// The mesh has no triangles (or no vertices).
     #[error("empty mesh: {vertices} vertices, {triangles} triangles")]
@@ -150,6 +151,75 @@ impl TriMesh {
             aabb,
             topology: OnceLock::new(),
         })
+    }
+
+    /// Validates and builds a mesh from an engine's f32 data, borrowed: `glam::Vec3` or
+    /// `[f32; 3]` positions and `[u32; 3]` triangles.
+    ///
+    /// Each coordinate is widened to f64 straight into the mesh's own storage (one allocation,
+    /// no intermediate `Vec<DVec3>`); widening is exact, so the mesh holds exactly the engine's
+    /// points. Validation and errors are those of [`TriMesh::new`], with the same indices:
+    /// a NaN or infinite coordinate is [`MeshError::NonFiniteVertex`] naming the vertex, a bad
+    /// index is [`MeshError::IndexOutOfRange`] naming the triangle and corner.
+    ///
+    /// An engine with a flat `&[f32]` (x, y, z, x, ...) or `&[u32]` buffer can view it as
+    /// `&[[f32; 3]]` / `&[[u32; 3]]` without copying (e.g. `bytemuck::cast_slice`).
+    ///
+    /// ```
+    /// use frcd_geom::{MeshError, TriMesh};
+    /// use glam::Vec3;
+    /// let engine_vertices = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z];
+    /// let engine_indices = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
+    /// let mesh = TriMesh::from_f32(&engine_vertices, &engine_indices)?;
+    /// assert!(mesh.topology().is_closed_oriented_manifold());
+    /// assert_eq!(mesh.vertices()[1].x, 1.0);
+    ///
+    /// // Plain arrays work the same; 0.1f32 is kept exactly (not rounded to 0.1f64).
+    /// let arrays = [[0.0f32, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 1.0, f32::NAN]];
+    /// assert!(matches!(TriMesh::from_f32(&arrays, &[[0, 1, 2]]),
+    ///     Err(MeshError::NonFiniteVertex { vertex: 2, .. })));
+    /// let ok = TriMesh::from_f32(&arrays[..2], &[[0, 1, 1]]).map(|m| m.vertices()[1].x);
+    /// assert_eq!(ok, Ok(f64::from(0.1f32)));
+    /// # Ok::<(), MeshError>(())
+    /// ```
+    pub fn from_f32<P>(vertices: &[P], indices: &[[u32; 3]]) -> Result<Self, MeshError>
+    where
+        P: Copy + Into<[f32; 3]>,
+    {
+        // Counts first, so a refused mesh allocates nothing.
+        if vertices.is_empty() || indices.is_empty() {
+            return Err(MeshError::Empty {
+                vertices: vertices.len(),
+                triangles: indices.len(),
+            });
+        }
+        let widened: Vec<DVec3> = vertices
+            .iter()
+            .map(|&p| {
+                let [x, y, z] = p.into();
+                DVec3::new(f64::from(x), f64::from(y), f64::from(z))
+            })
+            .collect();
+        // `new` runs the one validation path; f32 -> f64 keeps NaN and infinities, so the
+        // errors name the same vertex the caller passed.
+        Self::new(widened, indices.to_vec())
+    }
+
+    /// Bytes this mesh holds on the heap plus its own size: vertices (24 B each), triangles
+    /// (12 B each) and the validation report. About 24 B per triangle for a closed mesh
+    /// (half as many vertices as triangles).
+    ///
+    /// ```
+    /// use frcd_geom::{TriMesh, DVec3};
+    /// let m = TriMesh::new(vec![DVec3::ZERO, DVec3::X, DVec3::Y], vec![[0, 1, 2]]).unwrap();
+    /// assert!(m.memory_bytes() >= 3 * 24 + 12);
+    /// ```
+    pub fn memory_bytes(&self) -> usize {
+        std::mem::size_of::<Self>()
+            + self.vertices.capacity() * std::mem::size_of::<DVec3>()
+            + self.indices.capacity() * std::mem::size_of::<[u32; 3]>()
+            + self.report.degenerate.capacity() * std::mem::size_of::<u32>()
+            + self.report.duplicates.capacity() * std::mem::size_of::<(u32, u32)>()
     }
 
     fn inspect(vertices: &[DVec3], indices: &[[u32; 3]]) -> MeshReport {

@@ -27,6 +27,7 @@ use std::f64::consts::{PI, TAU};
 
 /// Why a shape could not be built.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
 pub enum ShapeError {
     /// A parameter is out of its valid range.
     #[error("{shape}: invalid parameter `{param}`: {reason}")]

@@ -1,3 +1,5 @@
+#![doc = include_str!("../README.md")]
+#![forbid(unsafe_code)]
 //! # frcd-gpgpu
 //!
 //! The thesis's GPGPU detector on wgpu: each body's OBB tree and triangles are packed into

@@ -1,3 +1,5 @@
+#![doc = include_str!("../README.md")]
+#![forbid(unsafe_code)]
 //! # frcd-hybrid
 //!
 //! The thesis's hybrid scheduler for many-body interference checking, stage by stage:

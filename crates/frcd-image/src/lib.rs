@@ -1,3 +1,5 @@
+#![doc = include_str!("../README.md")]
+#![forbid(unsafe_code)]
 //! # frcd-image
 //!
 //! Image-space interference detection of two closed triangle meshes with wgpu: Zou's method (c),

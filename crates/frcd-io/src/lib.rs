@@ -1,3 +1,5 @@
+#![doc = include_str!("../README.md")]
+#![forbid(unsafe_code)]
 //! # frcd-io
 //!
 //! Files in and out of frcd:

@@ -1,3 +1,5 @@
+#![doc = include_str!("../README.md")]
+#![forbid(unsafe_code)]
 //! # frcd-obb
 //!
 //! FRCD: OBB trees on the CPU with exact triangle tests.

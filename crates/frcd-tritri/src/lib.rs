@@ -1,3 +1,5 @@
+#![doc = include_str!("../README.md")]
+#![forbid(unsafe_code)]
 //! # frcd-tritri
 //!
 //! Triangle-triangle overlap tests. Triangles are closed sets: touching counts as intersecting.
