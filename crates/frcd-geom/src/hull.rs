@@ -70,6 +70,7 @@ pub enum Hull3 {
 
 /// Why a hull could not be computed.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
 pub enum HullError {
     /// An input coordinate is NaN or infinite.
     #[error("point {index} has a non-finite coordinate: {value:?}")]

@@ -55,7 +55,10 @@ fn f32_errors_name_the_same_element_as_the_f64_constructor() {
                 let e64 = TriMesh::new(widen(&v), tris.to_vec()).unwrap_err();
                 match (&e32, &e64) {
                     (
-                        MeshError::NonFiniteVertex { vertex: a, value: va },
+                        MeshError::NonFiniteVertex {
+                            vertex: a,
+                            value: va,
+                        },
                         MeshError::NonFiniteVertex { vertex: b, .. },
                     ) => {
                         assert_eq!((*a, *b), (vertex, vertex));
