@@ -5,7 +5,8 @@
 //! - `gen-bogie`: regenerates the bogie demo scene in testdata/bogie;
 //! - `bench`: run time against error tables and SVG plots.
 
-use anyhow::{Result, bail};
+use anyhow::Result;
+use clap::{Args, Parser, Subcommand};
 
 mod bench_gpgpu;
 mod bench_hybrid;
@@ -18,36 +19,60 @@ mod verify_gpgpu;
 mod verify_hybrid;
 mod verify_image;
 
-fn main() -> Result<()> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let (task, rest) = match args.split_first() {
-        Some((t, r)) => (t.as_str(), r),
-        None => ("help", &[][..]),
-    };
-    match task {
-        "stress" => stress::run(rest),
-        "bench" => bench(rest),
-        "verify" => verify::run(rest),
-        "gen-bogie" => gen_bogie::run(rest),
-        "help" | "--help" | "-h" => {
-            println!("usage: cargo xtask <stress|verify|bench|gen-bogie> [args]");
-            Ok(())
-        }
-        other => bail!("unknown task '{other}' (try: stress, verify, bench, gen-bogie)"),
-    }
+/// The project's verification, stress and benchmark drivers.
+#[derive(Parser)]
+#[command(name = "cargo xtask", bin_name = "cargo xtask")]
+struct Cli {
+    #[command(subcommand)]
+    task: Task,
 }
 
-/// `cargo xtask bench <suite> [args]`: the first argument selects the benchmark suite.
-fn bench(args: &[String]) -> Result<()> {
-    const SUITES: &str = "tritri, image, gpgpu, hybrid";
-    match args.split_first() {
-        Some((suite, rest)) => match suite.as_str() {
-            "tritri" => bench_tritri::run(rest),
-            "image" => bench_image::run(rest),
-            "gpgpu" => bench_gpgpu::run(rest),
-            "hybrid" => bench_hybrid::run(rest),
-            other => bail!("unknown bench suite '{other}' (available: {SUITES})"),
+#[derive(Subcommand)]
+enum Task {
+    /// Near-degenerate triangle families: wrong answers per method and family.
+    Stress(Rest),
+    /// Every backend against the exact oracle on generated and stored scenes.
+    Verify(Rest),
+    /// Run time against error tables and SVG plots, by suite.
+    Bench {
+        #[command(subcommand)]
+        suite: Suite,
+    },
+    /// Regenerates the bogie demo scene in testdata/bogie.
+    GenBogie(Rest),
+}
+
+#[derive(Subcommand)]
+enum Suite {
+    /// Every triangle-triangle method side by side at intersection ratios 0-100 %.
+    Tritri(Rest),
+    /// The image-space detector: run time against resolution against error.
+    Image(Rest),
+    /// The GPGPU pipeline against the CPU OBB traversal by scene size.
+    Gpgpu(Rest),
+    /// Run time against error of every backend and mode of the hybrid scheduler.
+    Hybrid(Rest),
+}
+
+/// A command's own options, passed on to its `run` (each command's file parses and documents
+/// them; `--help` after the command name prints its usage).
+#[derive(Args)]
+#[command(disable_help_flag = true)]
+struct Rest {
+    #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+    args: Vec<String>,
+}
+
+fn main() -> Result<()> {
+    match Cli::parse().task {
+        Task::Stress(r) => stress::run(&r.args),
+        Task::Verify(r) => verify::run(&r.args),
+        Task::GenBogie(r) => gen_bogie::run(&r.args),
+        Task::Bench { suite } => match suite {
+            Suite::Tritri(r) => bench_tritri::run(&r.args),
+            Suite::Image(r) => bench_image::run(&r.args),
+            Suite::Gpgpu(r) => bench_gpgpu::run(&r.args),
+            Suite::Hybrid(r) => bench_hybrid::run(&r.args),
         },
-        None => bail!("usage: cargo xtask bench <suite> [args] (suites: {SUITES})"),
     }
 }
