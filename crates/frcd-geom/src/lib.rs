@@ -37,6 +37,6 @@ mod triangle;
 pub use bounds::{Aabb, Obb, Sphere};
 pub use glam::{DMat3, DQuat, DVec2, DVec3};
 pub use mesh::{MeshError, MeshReport, TriMesh};
-pub use pose::Pose;
+pub use pose::{Pose, PoseError};
 pub use topology::Topology;
 pub use triangle::Triangle;
