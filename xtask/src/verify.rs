@@ -401,7 +401,7 @@ fn demo_scene() -> Result<Scene> {
             .collect(),
         frames: picks
             .iter()
-            .map(|&f| loaded.frames()[f].poses.clone())
+            .map(|&f| loaded.frame(f).poses)
             .collect(),
     })
 }
