@@ -86,6 +86,15 @@ fuzz_target!(|data: &[u8]| {
     assert_eq!(got.contained, want.contained, "containment differs");
     assert_eq!(got.collide, want.collide());
     // First contact agrees on the boolean.
-    let first = collide(&ta, &pa, &tb, &pb, &Request { mode: Mode::FirstContact, ..request });
+    let first = collide(
+        &ta,
+        &pa,
+        &tb,
+        &pb,
+        &Request {
+            mode: Mode::FirstContact,
+            ..request
+        },
+    );
     assert_eq!(first.collide, want.collide());
 });

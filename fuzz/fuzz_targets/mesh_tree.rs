@@ -18,12 +18,21 @@ fuzz_target!(|data: &[u8]| {
         FitMethod::AreaWeighted,
         FitMethod::HullSurface,
     ][(head[1] / 4 % 3) as usize];
-    let mut words = rest.chunks_exact(8).map(|c| u64::from_le_bytes(c.try_into().unwrap()));
+    let mut words = rest
+        .chunks_exact(8)
+        .map(|c| u64::from_le_bytes(c.try_into().unwrap()));
     let mut vertices = Vec::with_capacity(nv);
     for _ in 0..nv {
         let mut c = [0.0; 3];
         for x in &mut c {
             *x = f64::from_bits(words.next().unwrap_or(0));
+            // Known issue (found by this target, regressions/mesh_tree/subnormal_points): with
+            // subnormal coordinates the OBB padding and the SAT slack, both relative, do not
+            // cover the absolute rounding of subnormal arithmetic and the tree drops pairs.
+            // Flushed here so the target keeps looking for other failures; remove once fixed.
+            if x.is_subnormal() {
+                *x = 0.0;
+            }
         }
         vertices.push(DVec3::from_array(c));
     }

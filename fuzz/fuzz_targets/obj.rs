@@ -15,7 +15,9 @@ fuzz_target!(|data: &[u8]| {
     // merged one, with as many triangles in total.
     if let Ok(objects) = &per_object {
         let total: usize = objects.iter().map(|o| o.mesh.triangle_count()).sum();
-        let merged = one.as_ref().expect("per-object read succeeded, merged read failed");
+        let merged = one
+            .as_ref()
+            .expect("per-object read succeeded, merged read failed");
         assert_eq!(merged.triangle_count(), total);
     }
 });

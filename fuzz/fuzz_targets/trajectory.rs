@@ -8,7 +8,11 @@ fuzz_target!(|data: &[u8]| {
     if let Ok(t) = frcd_io::Trajectory::parse(data, path) {
         let lines = 1 + data.iter().filter(|&&b| b == b'\n').count();
         for r in &t.rows {
-            assert!(r.pose.is_valid(), "row at line {} has an invalid pose", r.line);
+            assert!(
+                r.pose.is_valid(),
+                "row at line {} has an invalid pose",
+                r.line
+            );
             assert!(r.line >= 1 && r.line <= lines, "line {} of {lines}", r.line);
             assert!(!r.body.is_empty());
         }
