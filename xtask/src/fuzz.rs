@@ -42,15 +42,15 @@ fn parse_stats(log: &str) -> Stats {
             s.execs = num(line).unwrap_or(0);
         }
         // "#1234  DONE   cov: 567 ft: ... corp: 89/..."
-        if let Some(i) = line.find("cov: ") {
-            if let Some(v) = line[i + 5..].split_whitespace().next() {
-                s.cov = v.parse().unwrap_or(s.cov);
-            }
+        if let Some(i) = line.find("cov: ")
+            && let Some(v) = line[i + 5..].split_whitespace().next()
+        {
+            s.cov = v.parse().unwrap_or(s.cov);
         }
-        if let Some(i) = line.find("corp: ") {
-            if let Some(v) = line[i + 6..].split('/').next() {
-                s.corpus = v.trim().parse().unwrap_or(s.corpus);
-            }
+        if let Some(i) = line.find("corp: ")
+            && let Some(v) = line[i + 6..].split('/').next()
+        {
+            s.corpus = v.trim().parse().unwrap_or(s.corpus);
         }
         if line.contains("ERROR: libFuzzer") || line.contains("panicked at") {
             s.crashed = true;
