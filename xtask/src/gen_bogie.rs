@@ -643,7 +643,7 @@ fn check(scene: &Scene) -> Result<Checked> {
                         b: bodies[j].name.clone(),
                         triangle_pairs: c.pairs.len() as u64,
                         contained: c.contained.is_some(),
-                        segments: Vec::new(),
+                        ..Interference::default()
                     });
                 }
             }
@@ -657,7 +657,7 @@ fn check(scene: &Scene) -> Result<Checked> {
     }
     report.summarize();
     let millis = start.elapsed().as_secs_f64() * 1e3;
-    let f0 = &scene.frames()[0];
+    let f0 = &scene.frame(0);
     let excluded_apart = scene
         .exclusions()
         .iter()
@@ -688,7 +688,7 @@ fn check(scene: &Scene) -> Result<Checked> {
     sample.dedup();
     let mut oracle_pairs = 0;
     for &k in &sample {
-        let frame = &scene.frames()[k];
+        let frame = &scene.frame(k);
         for &(i, j) in &candidates[k] {
             let o = frcd_obb::oracle::answer(
                 &bodies[i].mesh,

@@ -12,6 +12,7 @@ mod bench_gpgpu;
 mod bench_hybrid;
 mod bench_image;
 mod bench_tritri;
+mod fuzz;
 mod gen_bogie;
 mod stress;
 mod verify;
@@ -40,6 +41,8 @@ enum Task {
     },
     /// Regenerates the bogie demo scene in testdata/bogie.
     GenBogie(Rest),
+    /// Coverage-guided fuzzing of every target in fuzz/ (nightly + cargo-fuzz).
+    Fuzz(Rest),
 }
 
 #[derive(Subcommand)]
@@ -68,6 +71,7 @@ fn main() -> Result<()> {
         Task::Stress(r) => stress::run(&r.args),
         Task::Verify(r) => verify::run(&r.args),
         Task::GenBogie(r) => gen_bogie::run(&r.args),
+        Task::Fuzz(r) => fuzz::run(&r.args),
         Task::Bench { suite } => match suite {
             Suite::Tritri(r) => bench_tritri::run(&r.args),
             Suite::Image(r) => bench_image::run(&r.args),

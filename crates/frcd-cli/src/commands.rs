@@ -23,33 +23,188 @@ pub struct CheckRun {
     pub count: Option<usize>,
     pub quiet: bool,
     pub pair_times: bool,
+    pub pairs: bool,
 }
 
-fn load_scene(path: &Path, trajectory: Option<&Path>) -> Result<Scene> {
-    let scene = match trajectory {
-        Some(csv) => Scene::load_with_trajectory(path, csv),
-        None => Scene::load(path),
+fn load_scene(path: &Path, args: &CheckerArgs) -> Result<Scene> {
+    let options = frcd_io::SceneOptions {
+        allow_outside: args.allow_outside,
+        trajectories: args.trajectory.iter().cloned().collect(),
+        ..Default::default()
     };
-    scene.with_context(|| format!("cannot load scene {}", path.display()))
+    Scene::load_with(path, &options)
+        .with_context(|| format!("cannot load scene {}", term(&path.display().to_string())))
 }
 
-/// The cost model: `--cost`, else $FRCD_COST_MODEL, else ./frcd-cost.json, else built in.
-fn cost_model(path: Option<&Path>) -> Result<(CostModel, String)> {
+/// The text of a name or path as shown on a terminal: control characters (escape sequences,
+/// newlines, carriage returns) are shown escaped, never sent raw.
+pub fn term(s: &str) -> String {
+    if !s.chars().any(char::is_control) {
+        return s.to_owned();
+    }
+    s.chars()
+        .flat_map(|c| {
+            if c.is_control() {
+                c.escape_default().collect::<Vec<_>>()
+            } else {
+                vec![c]
+            }
+        })
+        .collect()
+}
+
+/// The cost model: `--cost`, else $FRCD_COST_MODEL, else the built-in figures. A model file
+/// in the working folder is never picked up by itself (only named); when one is there and
+/// unused, a note says so.
+fn cost_model(path: Option<&Path>, quiet: bool) -> Result<(CostModel, String)> {
     let explicit = path
         .map(Path::to_path_buf)
         .or_else(|| std::env::var_os("FRCD_COST_MODEL").map(PathBuf::from));
-    let p = match explicit {
-        Some(p) => p,
-        None => {
-            let d = PathBuf::from("frcd-cost.json");
-            if !d.exists() {
-                return Ok((CostModel::default(), "built-in".into()));
-            }
-            d
+    let Some(p) = explicit else {
+        if !quiet && Path::new("frcd-cost.json").is_file() {
+            eprintln!(
+                "note: ./frcd-cost.json is not used unless named: pass --cost frcd-cost.json or set FRCD_COST_MODEL"
+            );
         }
+        return Ok((CostModel::default(), "built-in".into()));
     };
+    // A regular file within the JSON limit (never a FIFO or /dev/zero), then the model's own
+    // reader and checks.
+    frcd_io::read_limited(&p, frcd_io::MAX_JSON_BYTES).context("cannot read the cost model")?;
     let m = CostModel::load(&p)?;
-    Ok((m, p.display().to_string()))
+    Ok((m, term(&p.display().to_string())))
+}
+
+/// Output files of a run, checked before any work: each can be written (folder exists and
+/// takes a file, not a directory or FIFO), none is another output, none is an input.
+fn check_outputs(outputs: &[(&str, &Path)], inputs: &[PathBuf]) -> Result<()> {
+    for (i, (flag, out)) in outputs.iter().enumerate() {
+        let shown = term(&out.display().to_string());
+        for input in inputs {
+            if frcd_io::same_file(out, input) {
+                bail!(
+                    "{flag} {shown} is one of the run's inputs ({}): refusing to overwrite it",
+                    term(&input.display().to_string())
+                );
+            }
+        }
+        for (flag2, out2) in &outputs[..i] {
+            if frcd_io::same_file(out, out2) {
+                bail!("{flag} {shown} is also given to {flag2}: each output needs its own file");
+            }
+        }
+        frcd_io::check_output_path(out).with_context(|| format!("{flag} {shown}"))?;
+    }
+    Ok(())
+}
+
+/// Notes on the meshes a scene loaded: degenerate or duplicate triangles, open or
+/// non-manifold surfaces (and what that means for solid mode).
+fn mesh_notes(scene: &Scene, solid: bool) -> Vec<String> {
+    let mut notes = Vec::new();
+    for (i, m) in scene.meshes().iter().enumerate() {
+        let file = term(&scene.mesh_paths()[i].display().to_string());
+        let r = m.report();
+        let t = m.topology();
+        let mut found = Vec::new();
+        if !r.degenerate.is_empty() {
+            found.push(format!(
+                "{} degenerate (zero-area) triangles",
+                r.degenerate.len()
+            ));
+        }
+        if !r.duplicates.is_empty() {
+            found.push(format!("{} duplicate triangles", r.duplicates.len()));
+        }
+        if t.boundary_edges > 0 {
+            found.push(format!("open ({} boundary edges)", t.boundary_edges));
+        }
+        if !t.is_manifold() {
+            found.push(format!(
+                "non-manifold ({} edges, {} vertices)",
+                t.non_manifold_edges, t.non_manifold_vertices
+            ));
+        } else if !t.is_oriented() {
+            found.push(format!(
+                "inconsistently oriented ({} edges)",
+                t.orientation_conflicts
+            ));
+        }
+        if found.is_empty() {
+            continue;
+        }
+        let mut note = format!("mesh {file}: {}", found.join(", "));
+        if solid && !t.is_closed() {
+            note.push_str(
+                "; it is not closed, so containment in it cannot be decided: only surface contact is reported for its bodies",
+            );
+        }
+        notes.push(note);
+    }
+    notes
+}
+
+/// Progress on a terminal only: a line on stderr refreshed every 250 ms by its own thread (so
+/// it moves during one long frame too), erased at the end. Nothing when stderr is not a
+/// terminal or with `-q`.
+struct Progress {
+    done: std::sync::Arc<std::sync::atomic::AtomicUsize>,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Progress {
+    fn start(total: usize, enabled: bool) -> Self {
+        use std::io::IsTerminal;
+        use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+        let done = std::sync::Arc::new(AtomicUsize::new(0));
+        let stop = std::sync::Arc::new(AtomicBool::new(false));
+        let thread = (enabled && std::io::stderr().is_terminal()).then(|| {
+            let (done, stop) = (done.clone(), stop.clone());
+            std::thread::spawn(move || {
+                let t0 = Instant::now();
+                let mut shown = false;
+                while !stop.load(Ordering::Relaxed) {
+                    std::thread::sleep(std::time::Duration::from_millis(250));
+                    if stop.load(Ordering::Relaxed) {
+                        break;
+                    }
+                    let k = done.load(Ordering::Relaxed);
+                    eprint!(
+                        "\r\x1b[Kframe {k}/{total} ({:.0}%), {:.1} s",
+                        100.0 * k as f64 / total.max(1) as f64,
+                        t0.elapsed().as_secs_f64()
+                    );
+                    let _ = std::io::stderr().flush();
+                    shown = true;
+                }
+                if shown {
+                    eprint!("\r\x1b[K");
+                    let _ = std::io::stderr().flush();
+                }
+            })
+        });
+        Self { done, stop, thread }
+    }
+
+    fn set(&self, k: usize) {
+        self.done.store(k, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
+impl Drop for Progress {
+    fn drop(&mut self) {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// A measured time in microseconds, rounded to 0.1 µs (the clock and the call around it are
+/// not finer than that).
+fn round_us(us: f64) -> f64 {
+    (us * 10.0).round() / 10.0
 }
 
 fn backend_of(b: BackendArg) -> Backend {
@@ -68,11 +223,11 @@ fn mode_of(m: ModeArg) -> Mode {
     }
 }
 
-fn options_of(args: &CheckerArgs, segments: bool) -> Result<(Options, String)> {
+fn options_of(args: &CheckerArgs, segments: bool, quiet: bool) -> Result<(Options, String)> {
     if !(16..=4096).contains(&args.resolution) {
         bail!("--resolution {} is outside 16..=4096", args.resolution);
     }
-    let (cost, source) = cost_model(args.cost.as_deref())?;
+    let (cost, source) = cost_model(args.cost.as_deref(), quiet)?;
     Ok((
         Options {
             mode: mode_of(args.mode),
@@ -109,15 +264,6 @@ fn make_checker(scene: &Scene, options: Options) -> Result<Checker> {
         .with_context(|| format!("cannot set up the '{backend}' backend"))
 }
 
-/// Every frame's poses (a scene without frames has one: the initial poses).
-fn frames_of(scene: &Scene) -> Vec<Vec<Pose>> {
-    if scene.frames().is_empty() {
-        vec![scene.bodies().iter().map(|b| b.initial_pose).collect()]
-    } else {
-        scene.frames().iter().map(|f| f.poses.clone()).collect()
-    }
-}
-
 fn segment_points(c: &Contact) -> Vec<[frcd_geom::DVec3; 2]> {
     match c {
         Contact::Point(p) => vec![[*p, *p]],
@@ -132,6 +278,7 @@ fn frame_report(
     time_us: f64,
     r: &FrameResult,
     poses: &[Pose],
+    pairs: bool,
 ) -> FrameReport {
     let interferences = r
         .contacts
@@ -154,12 +301,17 @@ fn frame_report(
                 triangle_pairs: c.pairs.len() as u64,
                 contained: c.contained.is_some(),
                 segments,
+                triangles: if pairs {
+                    c.pairs.iter().map(|&(x, y)| [x, y]).collect()
+                } else {
+                    Vec::new()
+                },
             }
         })
         .collect();
     FrameReport {
         index,
-        time_us,
+        time_us: round_us(time_us),
         interferences,
     }
 }
@@ -208,37 +360,62 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
 }
 
 pub fn check(run: &CheckRun) -> Result<()> {
-    let scene = load_scene(&run.scene, run.checker.trajectory.as_deref())?;
-    let (options, cost_source) = options_of(&run.checker, run.segments)?;
-    let mode = options.mode;
-    let t_setup = Instant::now();
-    let checker = make_checker(&scene, options)?;
-    let setup_ms = t_setup.elapsed().as_secs_f64() * 1e3;
-    for note in checker.notes() {
-        eprintln!("note: {note}");
+    if run.count == Some(0) {
+        bail!("--count 0 checks nothing: give at least 1 (or leave it out for every frame)");
     }
-    let frames = frames_of(&scene);
-    let n = frames.len();
+    // Outputs first: a typo or an output over an input costs nothing.
+    let mut outputs: Vec<(&str, &Path)> = Vec::new();
+    if let Some(p) = &run.json {
+        outputs.push(("--json", p));
+    }
+    if let Some(p) = &run.csv {
+        outputs.push(("--csv", p));
+    }
+    let mut early_inputs = vec![run.scene.clone()];
+    early_inputs.extend(run.checker.trajectory.iter().cloned());
+    early_inputs.extend(run.checker.cost.iter().cloned());
+    check_outputs(&outputs, &early_inputs)?;
+    let scene = load_scene(&run.scene, &run.checker)?;
+    let mut inputs = scene.input_paths();
+    inputs.extend(early_inputs);
+    check_outputs(&outputs, &inputs)?;
+
+    let n = scene.frame_count();
     if run.first >= n {
         bail!(
             "--first {} is past the last frame (the scene has {n})",
             run.first
         );
     }
+    // A count past the end (even one that would overflow) means "to the last frame".
     let end = match run.count {
-        Some(c) => (run.first + c).min(n),
+        Some(c) => run.first.saturating_add(c).min(n),
         None => n,
     };
+    let (options, cost_source) = options_of(&run.checker, run.segments, run.quiet)?;
+    let mode = options.mode;
+    let solid = options.solid;
+    let t_setup = Instant::now();
+    let checker = make_checker(&scene, options)?;
+    let setup_ms = t_setup.elapsed().as_secs_f64() * 1e3;
+    let mut notes: Vec<String> = checker.notes().iter().map(|n| term(n)).collect();
+    notes.extend(mesh_notes(&scene, solid));
+    if !run.quiet {
+        for note in &notes {
+            eprintln!("note: {note}");
+        }
+    }
     let mut report = Report::new(checker.options().backend.name(), mode.name());
     report.scene = Some(run.scene.display().to_string());
+    report.frame_range = Some([run.first, end - 1]);
     let mut state = FrameState::default();
     let mut tallies: [StageTally; 3] = Default::default();
     let mut pair_time: std::collections::HashMap<(usize, usize), (f64, usize)> = Default::default();
-    let progress = !run.quiet && end - run.first > 200;
-    let mut last_progress = Instant::now();
     let total = end - run.first;
-    for (k, index) in (run.first..end).enumerate() {
-        let poses = &frames[index];
+    let progress = Progress::start(total, !run.quiet);
+    for (k, frame) in scene.frames().range(run.first..end).enumerate() {
+        let index = run.first + k;
+        let poses = &frame.poses;
         let t = Instant::now();
         let r = checker
             .check(poses, &mut state)
@@ -256,107 +433,112 @@ pub fn check(run: &CheckRun) -> Result<()> {
         }
         report
             .frames
-            .push(frame_report(&checker, index, time_us, &r, poses));
-        if progress && last_progress.elapsed().as_millis() >= 250 {
-            last_progress = Instant::now();
-            eprint!(
-                "\rframe {}/{} ({:.0}%)",
-                k + 1,
-                total,
-                100.0 * (k + 1) as f64 / total as f64
-            );
-            let _ = std::io::stderr().flush();
-        }
+            .push(frame_report(&checker, index, time_us, &r, poses, run.pairs));
+        progress.set(k + 1);
     }
-    if progress {
-        eprintln!("\rframe {total}/{total} (100%)");
-    }
+    drop(progress);
     report.summarize();
     let mut times: Vec<f64> = report.frames.iter().map(|f| f.time_us).collect();
     times.sort_by(f64::total_cmp);
     let median = percentile(&times, 0.5);
-    println!(
-        "{}: {} bodies, {} triangles, frames {}..{} ({} checked); backend {}, mode {}, cost model {}",
-        run.scene.display(),
-        scene.bodies().len(),
-        scene.triangle_count(),
-        run.first,
-        end - 1,
-        total,
-        checker.options().backend.name(),
-        mode.name(),
-        cost_source
-    );
-    for a in checker.adapters() {
-        println!("  device {a}");
-    }
-    println!(
-        "  time per frame: median {:.1} µs, p95 {:.1} µs, max {:.1} µs (setup {:.0} ms)",
-        median,
-        percentile(&times, 0.95),
-        percentile(&times, 1.0),
-        setup_ms
-    );
-    for (name, t) in ["broad", "image", "narrow"].iter().zip(&tallies) {
-        println!("  stage {name:<6}: {}", t.describe());
-    }
-    if run.pair_times {
-        let mut v: Vec<_> = pair_time.into_iter().collect();
-        v.sort_by(|x, y| y.1.0.total_cmp(&x.1.0));
-        println!("  narrow-phase time by body pair (total over frames, CPU time of the pair):");
-        for ((a, b), (us, n)) in v.iter().take(12) {
-            println!(
-                "    {:>9.1} ms  {:>7.1} µs/frame  {} / {} ({n} frames)",
-                us / 1e3,
-                us / total as f64,
-                checker.body_name(*a).unwrap_or("?"),
-                checker.body_name(*b).unwrap_or("?")
-            );
+    let name = |i: usize| term(checker.body_name(i).unwrap_or("?"));
+    if !run.quiet {
+        println!(
+            "{}: {} bodies, {} triangles, frames {}..={} ({} checked); backend {}, mode {}, cost model {}",
+            term(&run.scene.display().to_string()),
+            scene.bodies().len(),
+            scene.triangle_count(),
+            run.first,
+            end - 1,
+            total,
+            checker.options().backend.name(),
+            mode.name(),
+            cost_source
+        );
+        for a in checker.adapters() {
+            println!("  device {}", term(&a));
         }
-    }
-    if report.pairs.is_empty() {
-        println!("no interference");
-    } else if !run.quiet {
-        println!("interferences:");
-        for p in &report.pairs {
-            let intervals: Vec<String> = p
-                .intervals
-                .iter()
-                .map(|[a, b]| {
-                    if a == b {
-                        format!("{a}")
-                    } else {
-                        format!("{a}-{b}")
-                    }
-                })
-                .collect();
-            println!(
-                "  {} / {}: frames {}..{} ({} frames, up to {} triangle pairs): {}",
-                p.a,
-                p.b,
-                p.first_frame,
-                p.last_frame,
-                p.frames,
-                p.max_triangle_pairs,
-                intervals.join(", ")
-            );
+        println!(
+            "  time per frame: median {:.1} µs, p95 {:.1} µs, max {:.1} µs (setup {:.0} ms)",
+            median,
+            percentile(&times, 0.95),
+            percentile(&times, 1.0),
+            setup_ms
+        );
+        for (stage, t) in ["broad", "image", "narrow"].iter().zip(&tallies) {
+            println!("  stage {stage:<6}: {}", t.describe());
+        }
+        if run.pair_times {
+            let mut v: Vec<_> = pair_time.into_iter().collect();
+            v.sort_by(|x, y| y.1.0.total_cmp(&x.1.0));
+            println!("  narrow-phase time by body pair (total over frames, CPU time of the pair):");
+            for ((a, b), (us, n)) in v.iter().take(12) {
+                println!(
+                    "    {:>9.1} ms  {:>7.1} µs/frame  {} / {} ({n} frames)",
+                    us / 1e3,
+                    us / total as f64,
+                    name(*a),
+                    name(*b)
+                );
+            }
+        }
+        if report.pairs.is_empty() {
+            println!("no interference");
+        } else {
+            println!("interferences:");
+            for p in &report.pairs {
+                let intervals: Vec<String> = p
+                    .intervals
+                    .iter()
+                    .map(|[a, b]| {
+                        if a == b {
+                            format!("{a}")
+                        } else {
+                            format!("{a}-{b}")
+                        }
+                    })
+                    .collect();
+                let what = match (p.max_triangle_pairs, p.contained) {
+                    (0, true) => "contained".to_string(),
+                    (n, true) => format!("up to {n} triangle pairs, or contained"),
+                    (n, false) => format!("up to {n} triangle pairs"),
+                };
+                println!(
+                    "  {} / {}: frames {}..={} ({} frames, {what}): {}",
+                    term(&p.a),
+                    term(&p.b),
+                    p.first_frame,
+                    p.last_frame,
+                    p.frames,
+                    intervals.join(", ")
+                );
+            }
         }
     }
     if let Some(path) = &run.json {
-        let mut value = serde_json::to_value(&report).context("report to JSON")?;
-        if let Some(obj) = value.as_object_mut() {
-            obj.insert("median_time_us".into(), serde_json::json!(median));
-            obj.insert("setup_ms".into(), serde_json::json!(setup_ms));
-            obj.insert(
-                "stages".into(),
-                serde_json::json!({"broad": tallies[0], "image": tallies[1], "narrow": tallies[2]}),
-            );
-            obj.insert("devices".into(), serde_json::json!(checker.adapters()));
-            obj.insert("notes".into(), serde_json::json!(checker.notes()));
+        /// The report plus the run's figures, serialised straight to text (no JSON tree in
+        /// memory: a million frames would take a gigabyte as `serde_json::Value`).
+        #[derive(serde::Serialize)]
+        struct Full<'a> {
+            #[serde(flatten)]
+            report: &'a Report,
+            median_time_us: f64,
+            setup_ms: f64,
+            stages: serde_json::Value,
+            devices: Vec<String>,
+            notes: &'a [String],
         }
-        let text = serde_json::to_string_pretty(&value).context("report to JSON")?;
-        std::fs::write(path, text + "\n")
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        let full = Full {
+            report: &report,
+            median_time_us: median,
+            setup_ms: setup_ms.round(),
+            stages: serde_json::json!({"broad": tallies[0], "image": tallies[1], "narrow": tallies[2]}),
+            devices: checker.adapters(),
+            notes: &notes,
+        };
+        let mut text = serde_json::to_vec_pretty(&full).context("report to JSON")?;
+        text.push(b'\n');
+        frcd_io::write_atomic(path, &text)?;
     }
     if let Some(path) = &run.csv {
         report.write_csv(path)?;
@@ -376,15 +558,23 @@ pub fn render(
     if !(16..=8192).contains(&width) || !(16..=8192).contains(&height) {
         bail!("image size {width}x{height} is outside 16..=8192 pixels per side");
     }
-    let scene = load_scene(scene_path, args.trajectory.as_deref())?;
-    let frames = frames_of(&scene);
-    let Some(poses) = frames.get(frame) else {
+    let early_inputs: Vec<PathBuf> = std::iter::once(scene_path.to_path_buf())
+        .chain(args.trajectory.iter().cloned())
+        .chain(args.cost.iter().cloned())
+        .collect();
+    check_outputs(&[("--output", output)], &early_inputs)?;
+    let scene = load_scene(scene_path, args)?;
+    let mut inputs = scene.input_paths();
+    inputs.extend(early_inputs);
+    check_outputs(&[("--output", output)], &inputs)?;
+    let Some(frame_poses) = scene.frames().get(frame) else {
         bail!(
             "--frame {frame} is past the last frame (the scene has {})",
-            frames.len()
+            scene.frame_count()
         );
     };
-    let (options, _) = options_of(args, false)?;
+    let poses = &frame_poses.poses;
+    let (options, _) = options_of(args, false, false)?;
     let checker = make_checker(&scene, options)?;
     let r = checker
         .check(poses, &mut FrameState::default())
@@ -412,15 +602,15 @@ pub fn render(
         crate::render::render_png(&scene, poses, &marks, width, height, all, output)?;
         println!(
             "{}: frame {frame}, {} interfering pairs ({} triangle pairs) highlighted",
-            output.display(),
+            term(&output.display().to_string()),
             r.contacts.len(),
             r.contacts.iter().map(|c| c.pairs.len()).sum::<usize>()
         );
         for c in &r.contacts {
             println!(
                 "  {} / {}: {} triangle pairs{}",
-                checker.body_name(c.a).unwrap_or("?"),
-                checker.body_name(c.b).unwrap_or("?"),
+                term(checker.body_name(c.a).unwrap_or("?")),
+                term(checker.body_name(c.b).unwrap_or("?")),
                 c.pairs.len(),
                 if c.contained.is_some() {
                     " (contained)"
@@ -462,14 +652,38 @@ pub fn bench(
     frames: usize,
     cost: Option<&Path>,
     json: Option<&Path>,
+    allow_outside: bool,
 ) -> Result<()> {
-    let scene = load_scene(scene_path, None)?;
-    let all = frames_of(&scene);
-    let frames = frames.clamp(1, all.len());
-    let (cost, source) = cost_model(cost)?;
+    let early_inputs: Vec<PathBuf> = std::iter::once(scene_path.to_path_buf())
+        .chain(cost.map(Path::to_path_buf))
+        .collect();
+    let outputs: Vec<(&str, &Path)> = json.map(|p| ("--json", p)).into_iter().collect();
+    check_outputs(&outputs, &early_inputs)?;
+    let scene = Scene::load_with(
+        scene_path,
+        &frcd_io::SceneOptions {
+            allow_outside,
+            ..Default::default()
+        },
+    )
+    .with_context(|| {
+        format!(
+            "cannot load scene {}",
+            term(&scene_path.display().to_string())
+        )
+    })?;
+    let mut inputs = scene.input_paths();
+    inputs.extend(early_inputs);
+    check_outputs(&outputs, &inputs)?;
+    if frames == 0 {
+        bail!("--frames 0 times nothing: give at least 1");
+    }
+    let frames = frames.min(scene.frame_count());
+    let all: Vec<Vec<Pose>> = scene.frames().range(0..frames).map(|f| f.poses).collect();
+    let (cost, source) = cost_model(cost, false)?;
     println!(
         "{}: {} bodies, {} triangles, {} frames timed per row; cost model {source}",
-        scene_path.display(),
+        term(&scene_path.display().to_string()),
         scene.bodies().len(),
         scene.triangle_count(),
         frames
@@ -574,8 +788,7 @@ pub fn bench(
     }
     if let Some(path) = json {
         let text = serde_json::to_string_pretty(&out).context("bench table to JSON")?;
-        std::fs::write(path, text + "\n")
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        frcd_io::write_atomic(path, (text + "\n").as_bytes())?;
     }
     Ok(())
 }
@@ -584,15 +797,17 @@ pub fn calibrate(output: &Path, repetitions: usize, cpu_only: bool) -> Result<()
     if repetitions == 0 {
         bail!("--repetitions must be at least 1");
     }
+    check_outputs(&[("--output", output)], &[])?;
     let t = Instant::now();
     let model = frcd_hybrid::calibrate::measure(&frcd_hybrid::calibrate::CalibrateOptions {
         repetitions,
         gpu: !cpu_only,
     });
-    model.save(output)?;
+    let text = serde_json::to_string_pretty(&model).context("model to JSON")?;
+    frcd_io::write_atomic(output, (text + "\n").as_bytes())?;
     println!(
         "{} written in {:.1} s{}",
-        output.display(),
+        term(&output.display().to_string()),
         t.elapsed().as_secs_f64(),
         if model.adapter.is_empty() {
             String::from(" (no GPU figures)")
@@ -612,5 +827,9 @@ pub fn calibrate(output: &Path, repetitions: usize, cpu_only: bool) -> Result<()
         Some(n) => println!("GPU pair query from {n} triangles per pair"),
         None => println!("GPU pair query: never"),
     }
+    println!(
+        "use it with `frcd check --cost {0}` (or FRCD_COST_MODEL={0}); it is never picked up by itself",
+        term(&output.display().to_string())
+    );
     Ok(())
 }

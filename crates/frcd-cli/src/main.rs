@@ -57,10 +57,14 @@ pub struct CheckerArgs {
     /// Mode.
     #[arg(long, value_enum, default_value = "exact")]
     pub mode: ModeArg,
-    /// Cost model JSON (from `frcd calibrate`); default: $FRCD_COST_MODEL, else
-    /// ./frcd-cost.json when present, else built-in figures.
+    /// Cost model JSON (from `frcd calibrate`); default: $FRCD_COST_MODEL, else the built-in
+    /// figures (a model file in the working folder is used only when named).
     #[arg(long)]
     pub cost: Option<PathBuf>,
+    /// Allow the scene to name meshes and trajectories outside its own folder (absolute paths,
+    /// `..`, symbolic links leading out).
+    #[arg(long)]
+    pub allow_outside: bool,
     /// Image-space resolution (pixels across a pair's overlap region).
     #[arg(long, default_value_t = 256)]
     pub resolution: u32,
@@ -104,13 +108,17 @@ enum Command {
         /// Include contact segments (world coordinates) in the JSON report.
         #[arg(long)]
         segments: bool,
+        /// Include the touching triangle pairs of each interference in the JSON report.
+        #[arg(long)]
+        pairs: bool,
         /// First frame to check.
         #[arg(long, default_value_t = 0)]
         first: usize,
-        /// Number of frames to check (default: all from --first).
+        /// Number of frames to check, at least 1 (default: all from --first; more than are left
+        /// means all from --first).
         #[arg(long)]
         count: Option<usize>,
-        /// No progress and no per-pair summary on the terminal.
+        /// Print nothing but errors (the reports are still written).
         #[arg(long, short)]
         quiet: bool,
         /// Print the body pairs that take the most narrow-phase time.
@@ -153,6 +161,9 @@ enum Command {
         /// Write the table as JSON here.
         #[arg(long)]
         json: Option<PathBuf>,
+        /// Allow the scene to name files outside its own folder.
+        #[arg(long)]
+        allow_outside: bool,
     },
     /// Measure the cost model on this machine and store it as JSON.
     Calibrate {
@@ -168,7 +179,47 @@ enum Command {
     },
 }
 
+/// Mesa's Vulkan and EGL drivers print "error: XDG_RUNTIME_DIR is invalid or not set" when
+/// the variable is missing or names no private folder, although frcd renders offscreen and
+/// needs no display. Point it at a private folder of our own before any GPU code runs.
+fn quiet_xdg_runtime_dir() {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
+        let ok = std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|d| {
+            std::fs::metadata(&d).is_ok_and(|m| {
+                m.is_dir() && m.permissions().mode() & 0o077 == 0 && m.uid() == uid_of_process()
+            })
+        });
+        if ok {
+            return;
+        }
+        let dir = std::env::temp_dir().join(format!("frcd-xdg-{}", uid_of_process()));
+        let _ = std::fs::DirBuilder::new().mode(0o700).create(&dir);
+        let private = std::fs::symlink_metadata(&dir).is_ok_and(|m| {
+            m.is_dir() && m.permissions().mode() & 0o077 == 0 && m.uid() == uid_of_process()
+        });
+        if private {
+            // SAFETY: called first thing in main, before any other thread exists.
+            unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
+        }
+    }
+}
+
+/// The real user id, from the owner of a file this process just made (no libc needed).
+#[cfg(unix)]
+fn uid_of_process() -> u32 {
+    use std::os::unix::fs::MetadataExt;
+    static UID: std::sync::OnceLock<u32> = std::sync::OnceLock::new();
+    *UID.get_or_init(|| {
+        std::fs::metadata("/proc/self")
+            .map(|m| m.uid())
+            .unwrap_or(u32::MAX)
+    })
+}
+
 fn main() -> ExitCode {
+    quiet_xdg_runtime_dir();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Check {
@@ -177,6 +228,7 @@ fn main() -> ExitCode {
             json,
             csv,
             segments,
+            pairs,
             first,
             count,
             quiet,
@@ -191,6 +243,7 @@ fn main() -> ExitCode {
             count,
             quiet,
             pair_times,
+            pairs,
         }),
         Command::Render {
             scene,
@@ -206,7 +259,14 @@ fn main() -> ExitCode {
             frames,
             cost,
             json,
-        } => commands::bench(&scene, frames, cost.as_deref(), json.as_deref()),
+            allow_outside,
+        } => commands::bench(
+            &scene,
+            frames,
+            cost.as_deref(),
+            json.as_deref(),
+            allow_outside,
+        ),
         Command::Calibrate {
             output,
             repetitions,
@@ -216,7 +276,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", commands::term(&format!("{e:#}")));
             ExitCode::FAILURE
         }
     }

@@ -147,16 +147,16 @@ pub fn render_png(
     let proj = DMat4::perspective_rh(fov_y, aspect, near, far);
     let m: Mat4 = (proj * view).as_mat4();
     let pixels = draw(&verts, solid_count, vertex_count, m, width, height)?;
-    let file = std::fs::File::create(output)
-        .with_context(|| format!("cannot create {}", output.display()))?;
-    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), width, height);
+    // Encoded in memory, then written atomically: a failed write never leaves a broken PNG.
+    let mut bytes = Vec::new();
+    let mut enc = png::Encoder::new(&mut bytes, width, height);
     enc.set_color(png::ColorType::Rgba);
     enc.set_depth(png::BitDepth::Eight);
-    let mut w = enc
-        .write_header()
-        .with_context(|| format!("cannot write {}", output.display()))?;
+    let mut w = enc.write_header().context("cannot encode the PNG")?;
     w.write_image_data(&pixels)
-        .with_context(|| format!("cannot write {}", output.display()))?;
+        .context("cannot encode the PNG")?;
+    w.finish().context("cannot encode the PNG")?;
+    frcd_io::write_atomic(output, &bytes)?;
     Ok(())
 }
 

@@ -93,7 +93,7 @@ fn check_writes_json_and_csv_reports() {
         );
         assert!(o.status.success(), "{}", text(&o));
         let stdout = String::from_utf8_lossy(&o.stdout);
-        assert!(stdout.contains("a / b: frames 1..3"), "{stdout}");
+        assert!(stdout.contains("a / b: frames 1..=3"), "{stdout}");
         let v: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(dir.join("r.json")).unwrap()).unwrap();
         assert_eq!(v["backend"], backend);
@@ -193,9 +193,14 @@ fn calibrate_writes_a_loadable_model() {
     assert!(o.status.success(), "{}", text(&o));
     let m = frcd_hybrid::CostModel::load(dir.join("frcd-cost.json")).unwrap();
     assert!(m.cpu_narrow_ns_per_triangle > 0.0 && m.gpu_narrow_us.is_none());
-    // The default model file in the working directory is picked up by check.
-    let o = frcd(&["check", "scene.json", "--quiet"], &dir);
+    // A model file in the working directory is never picked up by itself (issue 11): a note
+    // says it is there, and naming it uses it.
+    let o = frcd(&["check", "scene.json"], &dir);
     assert!(o.status.success(), "{}", text(&o));
+    let t = text(&o);
+    assert!(t.contains("cost model built-in"), "{t}");
+    assert!(t.contains("frcd-cost.json is not used unless named"), "{t}");
+    let o = frcd(&["check", "scene.json", "--cost", "frcd-cost.json"], &dir);
     assert!(
         String::from_utf8_lossy(&o.stdout).contains("cost model frcd-cost.json"),
         "{}",

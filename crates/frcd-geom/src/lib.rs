@@ -21,6 +21,6 @@ pub use bounds::{Aabb, Obb, Sphere};
 pub use glam::Vec3;
 pub use glam::{DMat3, DQuat, DVec2, DVec3};
 pub use mesh::{MeshError, MeshReport, TriMesh};
-pub use pose::Pose;
+pub use pose::{Pose, PoseError};
 pub use topology::Topology;
 pub use triangle::Triangle;

@@ -1,5 +1,29 @@
 use glam::{DMat3, DQuat, DVec3};
 
+/// Why a pose was refused by [`Pose::try_new`] or [`Pose::validate`].
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum PoseError {
+    /// A translation component is NaN or infinite.
+    #[error("translation {0:?} is not finite")]
+    NonFiniteTranslation([f64; 3]),
+    /// A quaternion component is NaN or infinite.
+    #[error("rotation quaternion {0:?} (x, y, z, w) is not finite")]
+    NonFiniteRotation([f64; 4]),
+    /// The quaternion has zero length (or so small a length that it cannot be normalised):
+    /// it names no rotation.
+    #[error("rotation quaternion {0:?} (x, y, z, w) has zero length: it names no rotation")]
+    ZeroRotation([f64; 4]),
+    /// The quaternion of a constructed pose is not of unit length (see [`Pose::validate`]).
+    #[error("rotation quaternion {quaternion:?} (x, y, z, w) has length {length}, not 1")]
+    NotUnitRotation {
+        /// The quaternion.
+        quaternion: [f64; 4],
+        /// Its length.
+        length: f64,
+    },
+}
+
 /// A rigid transform: rotate by `rotation` (a unit quaternion), then translate by `translation`.
 ///
 /// `p_world = rotation * p_local + translation`.
@@ -37,12 +61,86 @@ impl Pose {
     };
 
     /// A pose from a translation and a rotation; the quaternion is normalised.
+    ///
+    /// Takes the inputs on trust: a NaN or infinite component, or a zero quaternion, gives a
+    /// pose whose rotation is NaN, and queries with it answer nothing meaningful. Use
+    /// [`Pose::try_new`] for input you did not compute yourself, or check a pose with
+    /// [`Pose::validate`]; `frcd_obb::try_collide` does that for every query.
     #[inline]
     pub fn new(translation: DVec3, rotation: DQuat) -> Self {
         Self {
             translation,
             rotation: rotation.normalize(),
         }
+    }
+
+    /// A pose from a translation and a rotation, checked: every component finite and the
+    /// quaternion of non-zero length (it is normalised, so any non-zero length is accepted).
+    ///
+    /// ```
+    /// use frcd_geom::{Pose, PoseError, DVec3, DQuat};
+    /// assert!(Pose::try_new(DVec3::X, DQuat::from_xyzw(0.0, 0.0, 0.0, 2.0)).is_ok());
+    /// assert!(matches!(
+    ///     Pose::try_new(DVec3::new(f64::NAN, 0.0, 0.0), DQuat::IDENTITY),
+    ///     Err(PoseError::NonFiniteTranslation(_))
+    /// ));
+    /// assert!(matches!(
+    ///     Pose::try_new(DVec3::ZERO, DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0)),
+    ///     Err(PoseError::ZeroRotation(_))
+    /// ));
+    /// ```
+    pub fn try_new(translation: DVec3, rotation: DQuat) -> Result<Self, PoseError> {
+        if !translation.is_finite() {
+            return Err(PoseError::NonFiniteTranslation(translation.to_array()));
+        }
+        let q = rotation.to_array();
+        if !rotation.is_finite() {
+            return Err(PoseError::NonFiniteRotation(q));
+        }
+        // Scale by the largest component first, so tiny and huge (finite) quaternions
+        // normalise without underflow or overflow.
+        let m = q.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        if m == 0.0 {
+            return Err(PoseError::ZeroRotation(q));
+        }
+        let scaled = DQuat::from_array(q.map(|x| x / m));
+        if !scaled.is_finite() || scaled.length_squared() == 0.0 {
+            return Err(PoseError::ZeroRotation(q));
+        }
+        Ok(Self {
+            translation,
+            rotation: scaled.normalize(),
+        })
+    }
+
+    /// Checks a pose as queries need it: finite translation, finite unit quaternion (length
+    /// within 1e-6 of 1, looser than [`Pose::is_valid`] so poses composed in f64 pass).
+    ///
+    /// ```
+    /// use frcd_geom::{Pose, DVec3, DQuat};
+    /// assert!(Pose::new(DVec3::X, DQuat::from_rotation_z(1.0)).validate().is_ok());
+    /// // A zero quaternion normalises to NaN: the pose is refused, not silently used.
+    /// assert!(Pose::new(DVec3::X, DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0)).validate().is_err());
+    /// ```
+    pub fn validate(&self) -> Result<(), PoseError> {
+        if !self.translation.is_finite() {
+            return Err(PoseError::NonFiniteTranslation(self.translation.to_array()));
+        }
+        let q = self.rotation.to_array();
+        if !self.rotation.is_finite() {
+            return Err(PoseError::NonFiniteRotation(q));
+        }
+        let length = self.rotation.length();
+        if length == 0.0 {
+            return Err(PoseError::ZeroRotation(q));
+        }
+        if (length - 1.0).abs() > 1e-6 {
+            return Err(PoseError::NotUnitRotation {
+                quaternion: q,
+                length,
+            });
+        }
+        Ok(())
     }
 
     /// A pure translation.
@@ -119,5 +217,56 @@ impl core::ops::Mul for Pose {
     /// Same as [`Pose::compose`].
     fn mul(self, rhs: Pose) -> Pose {
         self.compose(&rhs)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn try_new_refuses_non_finite_and_zero_input() {
+        let nan = f64::NAN;
+        let inf = f64::INFINITY;
+        for t in [
+            DVec3::new(nan, 0.0, 0.0),
+            DVec3::new(0.0, inf, 0.0),
+            DVec3::new(0.0, 0.0, -inf),
+        ] {
+            assert!(matches!(
+                Pose::try_new(t, DQuat::IDENTITY),
+                Err(PoseError::NonFiniteTranslation(_))
+            ));
+            assert!(Pose::new(t, DQuat::IDENTITY).validate().is_err());
+        }
+        for q in [
+            DQuat::from_xyzw(nan, 0.0, 0.0, 1.0),
+            DQuat::from_xyzw(0.0, 0.0, inf, 1.0),
+        ] {
+            assert!(matches!(
+                Pose::try_new(DVec3::ZERO, q),
+                Err(PoseError::NonFiniteRotation(_))
+            ));
+        }
+        let zero = DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0);
+        assert!(matches!(
+            Pose::try_new(DVec3::ZERO, zero),
+            Err(PoseError::ZeroRotation(_))
+        ));
+        assert!(Pose::new(DVec3::ZERO, zero).validate().is_err());
+        // Not unit, but normalisable at any finite scale.
+        for s in [1e-300, 5e-324, 1e300, f64::MAX] {
+            let p = Pose::try_new(DVec3::ZERO, DQuat::from_xyzw(0.0, 0.0, s, s)).unwrap();
+            assert!(p.validate().is_ok(), "scale {s:e}");
+            assert!((p.rotation.z - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-15);
+        }
+        let raw = Pose {
+            translation: DVec3::ZERO,
+            rotation: DQuat::from_xyzw(0.0, 0.0, 0.0, 2.0),
+        };
+        assert!(matches!(
+            raw.validate(),
+            Err(PoseError::NotUnitRotation { length, .. }) if length == 2.0
+        ));
     }
 }

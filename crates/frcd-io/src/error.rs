@@ -115,6 +115,49 @@ pub enum Error {
         /// Where ("frame 12", "line 40").
         place: String,
     },
+    /// The path is a directory, FIFO, device or socket, not a regular file (a FIFO would block,
+    /// a device such as `/dev/zero` never ends).
+    #[error("{}: is {kind}, not a regular file", path.display())]
+    NotAFile {
+        /// The path.
+        path: PathBuf,
+        /// What it is ("a directory", "a FIFO (named pipe)", ...).
+        kind: &'static str,
+    },
+    /// The file is larger than the limit frcd reads (see [`crate::Limits`]).
+    #[error("{}: {} exceeds the limit of {limit} bytes (see docs/limits.md)", path.display(), size.map_or_else(|| "the file".to_string(), |s| format!("{s} bytes")))]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// Its size, when known before reading.
+        size: Option<u64>,
+        /// The limit.
+        limit: u64,
+    },
+    /// A scene names a file outside its own folder (an absolute path, `..`, or a symbolic link
+    /// leading out) and the caller did not allow that ([`crate::SceneOptions::allow_outside`],
+    /// `frcd --allow-outside`).
+    #[error("{}: {what} '{}' is outside the scene's folder {} (pass --allow-outside to allow it)", path.display(), file.display(), folder.display())]
+    OutsideSceneFolder {
+        /// The scene file.
+        path: PathBuf,
+        /// Which entry ("mesh of body 'rail'", "trajectory").
+        what: String,
+        /// The path as the scene gives it.
+        file: PathBuf,
+        /// The scene's folder.
+        folder: PathBuf,
+    },
+    /// A count or index is past a documented limit or would overflow.
+    #[error("{}: {place}: {msg}", path.display())]
+    Limit {
+        /// The file.
+        path: PathBuf,
+        /// Where ("line 40", "frame 12").
+        place: String,
+        /// What is too large.
+        msg: String,
+    },
     /// Anything else a scene, trajectory or report file gets wrong (said in the message).
     #[error("{}: {msg}", path.display())]
     Invalid {
@@ -137,7 +180,11 @@ impl Error {
             | Error::UnknownBody { path, .. }
             | Error::BadPose { path, .. }
             | Error::StaticBodyMoves { path, .. }
-            | Error::Invalid { path, .. } => path,
+            | Error::Invalid { path, .. }
+            | Error::NotAFile { path, .. }
+            | Error::TooLarge { path, .. }
+            | Error::OutsideSceneFolder { path, .. }
+            | Error::Limit { path, .. } => path,
         }
     }
 

@@ -25,6 +25,7 @@
 #![warn(missing_docs)]
 
 mod error;
+mod fs;
 mod mesh;
 mod report;
 mod scene;
@@ -32,13 +33,18 @@ mod trajectory;
 mod write;
 
 pub use error::{Error, Location};
+pub use fs::{
+    Limits, MAX_FRAMES, MAX_JSON_BYTES, MAX_MESH_BYTES, MAX_SCENE_BYTES, MAX_TRAJECTORY_BYTES,
+    check_output_path, read_limited, read_text_limited, same_file, write_atomic,
+};
 pub use mesh::{
     LoadOptions, MeshFormat, ObjObject, load_mesh, load_mesh_with, load_obj_objects, parse_obj,
     parse_obj_objects, parse_stl,
 };
 pub use report::{FrameReport, Interference, PairSummary, Report};
 pub use scene::{
-    Body, BodySpec, Frame, FramePoses, PoseSpec, Scene, SceneFile, UNIT_QUATERNION_TOLERANCE,
+    Body, BodySpec, Frame, FrameIter, FramePoses, Frames, PoseSpec, Scene, SceneFile, SceneOptions,
+    UNIT_QUATERNION_TOLERANCE,
 };
 pub use trajectory::{TRAJECTORY_HEADER, Trajectory, TrajectoryRow};
 pub use write::{write_obj, write_stl_binary};

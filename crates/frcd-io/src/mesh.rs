@@ -7,12 +7,24 @@ use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
 
 /// How meshes are loaded.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct LoadOptions {
     /// After welding bit-identical positions, also merge vertices closer than this distance
     /// (in the file's units; see [`TriMesh::welded`]). `0.0` (the default) welds exact
     /// duplicates only, which is what a correct STL export needs.
     pub weld_tolerance: f64,
+    /// Largest file read, in bytes ([`crate::MAX_MESH_BYTES`] by default); a larger file is an
+    /// [`Error::TooLarge`].
+    pub max_bytes: u64,
+}
+
+impl Default for LoadOptions {
+    fn default() -> Self {
+        Self {
+            weld_tolerance: 0.0,
+            max_bytes: crate::MAX_MESH_BYTES,
+        }
+    }
 }
 
 /// The mesh formats frcd reads.
@@ -62,7 +74,7 @@ pub fn load_mesh_with(path: impl AsRef<Path>, options: &LoadOptions) -> Result<T
     let path = path.as_ref();
     let format = MeshFormat::from_path(path)
         .ok_or_else(|| Error::UnsupportedFormat { path: path.into() })?;
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::read_limited(path, options.max_bytes)?;
     let mesh = match format {
         MeshFormat::Stl => parse_stl(&bytes, path)?,
         MeshFormat::Obj => parse_obj(&bytes, path)?,
@@ -75,7 +87,7 @@ pub fn load_mesh_with(path: impl AsRef<Path>, options: &LoadOptions) -> Result<T
 /// `"unnamed_object"`.
 pub fn load_obj_objects(path: impl AsRef<Path>, options: &LoadOptions) -> Result<Vec<ObjObject>> {
     let path = path.as_ref();
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::read_limited(path, options.max_bytes)?;
     let mut objects = parse_obj_objects(&bytes, path)?;
     for o in &mut objects {
         if options.weld_tolerance > 0.0 {

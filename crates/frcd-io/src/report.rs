@@ -1,6 +1,6 @@
 //! Interference reports as JSON and CSV.
 
-use crate::{Error, Result};
+use crate::Result;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -20,6 +20,10 @@ pub struct Interference {
     /// Intersection segments (world coordinates), when the checker was asked for them.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub segments: Vec<[[f64; 3]; 2]>,
+    /// The touching triangle pairs `[tri_a, tri_b]` (indices into the bodies' meshes as
+    /// loaded), sorted, when the run was asked for them (`frcd check --pairs`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub triangles: Vec<[u32; 2]>,
 }
 
 /// The result of one frame.
@@ -48,13 +52,36 @@ pub struct PairSummary {
     pub frames: usize,
     /// Largest triangle-pair count over those frames.
     pub max_triangle_pairs: u64,
+    /// True when, in some frame, one body lay wholly inside the other (solid mode) with no
+    /// touching triangle pair.
+    #[serde(default)]
+    pub contained: bool,
     /// Runs of consecutive interfering frames, `[first, last]` inclusive.
     pub intervals: Vec<[usize; 2]>,
 }
 
+/// The units of a report's numbers.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Units {
+    /// Lengths (segments): frcd keeps the mesh files' coordinates as they are, so lengths are
+    /// in whatever unit the files use.
+    pub length: String,
+    /// Times (`time_us`, `median_time_us`).
+    pub time: String,
+}
+
+impl Default for Units {
+    fn default() -> Self {
+        Self {
+            length: "as in the mesh files".into(),
+            time: "microseconds, rounded to 0.1".into(),
+        }
+    }
+}
+
 /// An interference-check report.
 ///
-/// JSON: `{"backend", "mode", "frames": [{"index", "time_us", "interferences": [{"a", "b",
+/// JSON: `{"frcd_version", "backend", "mode", "units", "frame_range", "frames": [{"index", "time_us", "interferences": [{"a", "b",
 /// "triangle_pairs", "contained"}]}], "pairs": [...]}` (plus optional fields). CSV: one row
 /// per interference, `frame,time_us,a,b,triangle_pairs,contained`; a frame without any has one
 /// row with empty `a`, `b` so its time is kept.
@@ -73,6 +100,9 @@ pub struct PairSummary {
 /// ```
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Report {
+    /// Version of frcd that wrote the report.
+    #[serde(default)]
+    pub frcd_version: String,
     /// Backend that produced the report (`cpu`, `gpgpu`, `image`, `hybrid`, ...).
     pub backend: String,
     /// `exact` or `fast`.
@@ -80,6 +110,12 @@ pub struct Report {
     /// The scene file, if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scene: Option<String>,
+    /// Units of lengths and times.
+    #[serde(default)]
+    pub units: Units,
+    /// The frames checked, `[first, last]` inclusive (`None` when no frame was checked).
+    #[serde(default)]
+    pub frame_range: Option<[usize; 2]>,
     /// Per-frame results.
     pub frames: Vec<FrameReport>,
     /// Per-pair summary (fill with [`Report::summarize`]).
@@ -91,6 +127,7 @@ impl Report {
     /// An empty report for a backend and mode.
     pub fn new(backend: impl Into<String>, mode: impl Into<String>) -> Self {
         Self {
+            frcd_version: env!("CARGO_PKG_VERSION").into(),
             backend: backend.into(),
             mode: mode.into(),
             ..Default::default()
@@ -117,6 +154,7 @@ impl Report {
                 s.last_frame = s.last_frame.max(f.index);
                 s.frames += 1;
                 s.max_triangle_pairs = s.max_triangle_pairs.max(i.triangle_pairs);
+                s.contained |= i.contained;
                 match s.intervals.last_mut() {
                     Some(last) if last[1] + 1 == f.index => last[1] = f.index,
                     _ => s.intervals.push([f.index, f.index]),
@@ -143,16 +181,16 @@ impl Report {
         serde_json::to_string_pretty(self).expect("a report always serialises")
     }
 
-    /// Writes the JSON report.
+    /// Writes the JSON report atomically (see [`crate::write_atomic`]).
     pub fn write_json(&self, path: impl AsRef<Path>) -> Result<()> {
         let path = path.as_ref();
-        std::fs::write(path, self.to_json_string() + "\n").map_err(|e| Error::io(path, e))
+        crate::write_atomic(path, (self.to_json_string() + "\n").as_bytes())
     }
 
     /// Reads a JSON report.
     pub fn read_json(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = crate::read_text_limited(path, crate::MAX_JSON_BYTES)?;
         serde_json::from_str(&text).map_err(|e| crate::scene::json_error(&e, path))
     }
 
@@ -186,9 +224,9 @@ impl Report {
         s
     }
 
-    /// Writes the CSV report.
+    /// Writes the CSV report atomically (see [`crate::write_atomic`]).
     pub fn write_csv(&self, path: impl AsRef<Path>) -> Result<()> {
         let path = path.as_ref();
-        std::fs::write(path, self.to_csv_string()).map_err(|e| Error::io(path, e))
+        crate::write_atomic(path, self.to_csv_string().as_bytes())
     }
 }

@@ -1,6 +1,6 @@
 //! Scene files: bodies, meshes, exclusions and a trajectory of poses.
 
-use crate::{Error, Result, Trajectory, load_mesh};
+use crate::{Error, Result, Trajectory};
 use frcd_geom::{DQuat, DVec3, Pose, TriMesh};
 use serde::de::{MapAccess, Visitor};
 use serde::ser::SerializeMap;
@@ -166,10 +166,14 @@ impl SceneFile {
         serde_json::from_str(text).map_err(|e| json_error(&e, path))
     }
 
-    /// Reads and parses a scene file.
+    /// Reads and parses a scene file (at most [`crate::MAX_SCENE_BYTES`]; a FIFO, device or
+    /// directory is refused).
     pub fn read(path: impl AsRef<Path>) -> Result<Self> {
-        let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        Self::read_with(path.as_ref(), crate::MAX_SCENE_BYTES)
+    }
+
+    fn read_with(path: &Path, limit: u64) -> Result<Self> {
+        let text = crate::read_text_limited(path, limit)?;
         Self::parse(&text, path)
     }
 
@@ -180,7 +184,7 @@ impl SceneFile {
             path: path.into(),
             msg: e.to_string(),
         })?;
-        std::fs::write(path, text + "\n").map_err(|e| Error::io(path, e))
+        crate::write_atomic(path, (text + "\n").as_bytes())
     }
 }
 
@@ -223,39 +227,212 @@ pub struct Frame {
     pub moved: Vec<usize>,
 }
 
-/// A loaded, validated scene: meshes loaded once per distinct file, frames expanded to full pose
-/// vectors.
+/// How a scene is loaded: which files it may name, and the input limits.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SceneOptions {
+    /// Allow mesh and trajectory paths outside the scene file's folder (absolute paths, `..`,
+    /// symbolic links leading out). Off by default: a scene from elsewhere cannot make frcd
+    /// read `/etc/passwd` or a device ([`Error::OutsideSceneFolder`]).
+    pub allow_outside: bool,
+    /// Input limits (file sizes, frame indices).
+    pub limits: crate::Limits,
+    /// Extra trajectory CSV files merged into the frames (given by the user, so never checked
+    /// against the scene's folder).
+    pub trajectories: Vec<PathBuf>,
+}
+
+/// One pose given in a file: the body, the frame, where it came from.
+#[derive(Clone, Copy, Debug)]
+struct Key {
+    frame: u32,
+    body: u32,
+    /// Source: 0 the scene file's frames, 1 its trajectory, 2.. the extra trajectories.
+    source: u32,
+    /// Line in a trajectory, frame index in the scene file.
+    line: u32,
+    pose: Pose,
+}
+
+/// A loaded, validated scene: meshes loaded once per distinct file, frames stored **sparsely**
+/// (one entry per pose given in the files: memory grows with the rows given, not with the frame
+/// count times the body count) and expanded on demand by [`Scene::frame`] and
+/// [`Scene::frames`]. A body not listed in a frame holds its last pose (no interpolation).
 #[derive(Clone, Debug)]
 pub struct Scene {
     path: PathBuf,
     bodies: Vec<Body>,
     meshes: Vec<Arc<TriMesh>>,
     mesh_paths: Vec<PathBuf>,
+    trajectory_paths: Vec<PathBuf>,
     exclude: Vec<(usize, usize)>,
-    frames: Vec<Frame>,
+    /// Every pose given, sorted by (frame, body).
+    keys: Vec<Key>,
+    /// Per body, the positions in `keys` of its entries (ascending frame).
+    by_body: Vec<Vec<u32>>,
+    frame_count: usize,
 }
 
+/// The frames of a scene, expanded one at a time (see [`Scene::frames`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Frames<'a> {
+    scene: &'a Scene,
+}
+
+impl<'a> Frames<'a> {
+    /// Number of frames.
+    pub fn len(&self) -> usize {
+        self.scene.frame_count
+    }
+
+    /// Never true: a scene has at least one frame.
+    pub fn is_empty(&self) -> bool {
+        self.scene.frame_count == 0
+    }
+
+    /// Frame `k`, if it exists (see [`Scene::frame`]).
+    pub fn get(&self, k: usize) -> Option<Frame> {
+        (k < self.scene.frame_count).then(|| self.scene.frame(k))
+    }
+
+    /// The frames in order; each costs O(bodies + poses given in it).
+    pub fn iter(&self) -> FrameIter<'a> {
+        self.range(0..self.scene.frame_count)
+    }
+
+    /// Frames `range` (clamped to the scene), in order; starting costs one [`Scene::frame`].
+    pub fn range(&self, range: std::ops::Range<usize>) -> FrameIter<'a> {
+        let end = range.end.min(self.scene.frame_count);
+        let start = range.start.min(end);
+        let (poses, cursor) = if start == 0 {
+            (self.scene.initial_poses(), 0)
+        } else {
+            let f = self.scene.frame(start - 1);
+            let cursor = self
+                .scene
+                .keys
+                .partition_point(|k| (k.frame as usize) < start);
+            (f.poses, cursor)
+        };
+        FrameIter {
+            scene: self.scene,
+            next: start,
+            end,
+            poses,
+            cursor,
+        }
+    }
+}
+
+impl<'a> IntoIterator for Frames<'a> {
+    type Item = Frame;
+    type IntoIter = FrameIter<'a>;
+    fn into_iter(self) -> FrameIter<'a> {
+        self.iter()
+    }
+}
+
+/// Iterator over expanded frames (see [`Frames::iter`]).
+#[derive(Clone, Debug)]
+pub struct FrameIter<'a> {
+    scene: &'a Scene,
+    next: usize,
+    end: usize,
+    poses: Vec<Pose>,
+    cursor: usize,
+}
+
+impl Iterator for FrameIter<'_> {
+    type Item = Frame;
+    fn next(&mut self) -> Option<Frame> {
+        if self.next >= self.end {
+            return None;
+        }
+        let k = self.next;
+        self.next += 1;
+        let keys = &self.scene.keys;
+        let mut moved = Vec::new();
+        while self.cursor < keys.len() && keys[self.cursor].frame as usize == k {
+            let key = &keys[self.cursor];
+            let b = key.body as usize;
+            if self.poses[b] != key.pose {
+                moved.push(b);
+            }
+            self.poses[b] = key.pose;
+            self.cursor += 1;
+        }
+        Some(Frame {
+            poses: self.poses.clone(),
+            moved,
+        })
+    }
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        let n = self.end - self.next;
+        (n, Some(n))
+    }
+}
+
+impl ExactSizeIterator for FrameIter<'_> {}
+
 impl Scene {
-    /// Loads a scene file, its meshes and its trajectory CSV (if it names one).
+    /// Loads a scene file, its meshes and its trajectory CSV (if it names one), with the
+    /// default [`SceneOptions`] (files outside the scene's folder refused, default limits).
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
-        let path = path.as_ref();
-        let spec = SceneFile::read(path)?;
-        Self::from_spec(&spec, path, None)
+        Self::load_with(path, &SceneOptions::default())
     }
 
     /// Loads a scene file and merges the rows of an extra trajectory CSV into its frames.
     pub fn load_with_trajectory(path: impl AsRef<Path>, csv: impl AsRef<Path>) -> Result<Self> {
+        let options = SceneOptions {
+            trajectories: vec![csv.as_ref().to_path_buf()],
+            ..SceneOptions::default()
+        };
+        Self::load_with(path, &options)
+    }
+
+    /// Loads a scene file with options (outside paths, limits, extra trajectories).
+    pub fn load_with(path: impl AsRef<Path>, options: &SceneOptions) -> Result<Self> {
         let path = path.as_ref();
-        let spec = SceneFile::read(path)?;
-        let extra = Trajectory::load(csv)?;
-        Self::from_spec(&spec, path, Some(&extra))
+        let spec = SceneFile::read_with(path, options.limits.scene_bytes)?;
+        Self::build(&spec, path, None, options)
     }
 
     /// Builds a scene from a parsed scene file. Mesh and trajectory paths are relative to
-    /// `path`'s folder; `path` also names the file in errors. `extra` rows are merged into the
-    /// frames like the file's own trajectory.
+    /// `path`'s folder (and must lie inside it); `path` also names the file in errors. `extra`
+    /// rows are merged into the frames like the file's own trajectory.
     pub fn from_spec(spec: &SceneFile, path: &Path, extra: Option<&Trajectory>) -> Result<Self> {
-        let base = path.parent().unwrap_or(Path::new(""));
+        Self::build(spec, path, extra, &SceneOptions::default())
+    }
+
+    /// [`Scene::from_spec`] with options.
+    pub fn from_spec_with(
+        spec: &SceneFile,
+        path: &Path,
+        extra: Option<&Trajectory>,
+        options: &SceneOptions,
+    ) -> Result<Self> {
+        Self::build(spec, path, extra, options)
+    }
+
+    fn build(
+        spec: &SceneFile,
+        path: &Path,
+        extra: Option<&Trajectory>,
+        options: &SceneOptions,
+    ) -> Result<Self> {
+        let base = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        if spec.bodies.len() > u32::MAX as usize {
+            return Err(Error::Invalid {
+                path: path.into(),
+                msg: format!(
+                    "{} bodies: more than u32 indices address",
+                    spec.bodies.len()
+                ),
+            });
+        }
         let mut index: HashMap<&str, usize> = HashMap::new();
         for (i, b) in spec.bodies.iter().enumerate() {
             if b.name.is_empty() {
@@ -271,18 +448,25 @@ impl Scene {
                 });
             }
         }
+        let inside = |file: &str, what: &dyn Fn() -> String| -> Result<PathBuf> {
+            resolve_inside(path, base, file, options.allow_outside, what)
+        };
         // Meshes, loaded once per distinct file.
+        let load = crate::LoadOptions {
+            max_bytes: options.limits.mesh_bytes,
+            ..crate::LoadOptions::default()
+        };
         let mut meshes: Vec<Arc<TriMesh>> = Vec::new();
         let mut mesh_paths: Vec<PathBuf> = Vec::new();
         let mut by_file: HashMap<PathBuf, usize> = HashMap::new();
         let mut bodies = Vec::with_capacity(spec.bodies.len());
         for b in &spec.bodies {
-            let file = base.join(&b.mesh);
+            let file = inside(&b.mesh, &|| format!("mesh of body '{}'", b.name))?;
             let key = std::fs::canonicalize(&file).map_err(|e| Error::io(&file, e))?;
             let mesh_index = match by_file.get(&key) {
                 Some(&i) => i,
                 None => {
-                    let mesh = load_mesh(&file)?;
+                    let mesh = crate::load_mesh_with(&file, &load)?;
                     meshes.push(Arc::new(mesh));
                     mesh_paths.push(file.clone());
                     by_file.insert(key, meshes.len() - 1);
@@ -324,39 +508,24 @@ impl Scene {
         exclude.sort_unstable();
         exclude.dedup();
 
-        // Per frame, the updates and where each came from (to name both sides of a conflict).
-        let mut updates: Vec<Vec<(usize, Pose)>> = Vec::new();
-        let mut origin: HashMap<(usize, usize), (PathBuf, String)> = HashMap::new();
-        let mut add = |frame: usize,
-                       body: usize,
-                       pose: Pose,
-                       file: &Path,
-                       place: String,
-                       bodies: &[Body]|
-         -> Result<()> {
-            if bodies[body].is_static {
-                return Err(Error::StaticBodyMoves {
-                    path: file.into(),
-                    name: bodies[body].name.clone(),
-                    place,
-                });
-            }
-            if let Some((f0, p0)) = origin.get(&(frame, body)) {
-                return Err(Error::Invalid {
-                    path: file.into(),
-                    msg: format!(
-                        "{place}: body '{}' in frame {frame} was already given a pose ({}: {p0})",
-                        bodies[body].name,
-                        f0.display()
-                    ),
-                });
-            }
-            origin.insert((frame, body), (file.to_path_buf(), place));
-            if updates.len() <= frame {
-                updates.resize_with(frame + 1, Vec::new);
-            }
-            updates[frame].push((body, pose));
-            Ok(())
+        let max_frames = options.limits.frames.min(u32::MAX as u64);
+        if spec.frames.len() as u64 > max_frames {
+            return Err(Error::Limit {
+                path: path.into(),
+                place: "frames".into(),
+                msg: format!(
+                    "{} frames are past the limit of {max_frames}",
+                    spec.frames.len()
+                ),
+            });
+        }
+        // Every pose given, with where it came from (sources: the scene, then trajectories).
+        let mut sources: Vec<PathBuf> = vec![path.to_path_buf()];
+        let mut keys: Vec<Key> = Vec::new();
+        let static_error = |b: usize, file: &Path, place: String| Error::StaticBodyMoves {
+            path: file.into(),
+            name: bodies[b].name.clone(),
+            place,
         };
         for (f, frame) in spec.frames.iter().enumerate() {
             for (name, pose) in &frame.0 {
@@ -366,55 +535,146 @@ impl Scene {
                     place: format!("frame {f}, body '{name}'"),
                     msg,
                 })?;
-                add(f, b, pose, path, format!("frame {f}"), &bodies)?;
-            }
-        }
-        let own = match &spec.trajectory {
-            Some(csv) => Some(Trajectory::load(base.join(csv))?),
-            None => None,
-        };
-        for traj in own.iter().chain(extra) {
-            for row in &traj.rows {
-                let place = || format!("line {}", row.line);
-                let b = lookup(&row.body, &traj.path, &place)?;
-                add(row.frame, b, row.pose, &traj.path, place(), &bodies)?;
-            }
-        }
-        // Expand to full pose vectors.
-        let mut prev: Vec<Pose> = bodies.iter().map(|b| b.initial_pose).collect();
-        let mut frames = Vec::with_capacity(updates.len().max(1));
-        for list in &updates {
-            let mut poses = prev.clone();
-            let mut moved = Vec::new();
-            for &(b, pose) in list {
-                if poses[b] != pose {
-                    moved.push(b);
+                if bodies[b].is_static {
+                    return Err(static_error(b, path, format!("frame {f}")));
                 }
-                poses[b] = pose;
+                keys.push(Key {
+                    frame: f as u32,
+                    body: b as u32,
+                    source: 0,
+                    line: f as u32,
+                    pose,
+                });
             }
-            moved.sort_unstable();
-            prev = poses.clone();
-            frames.push(Frame { poses, moved });
         }
-        if frames.is_empty() {
-            frames.push(Frame {
-                poses: prev,
-                moved: Vec::new(),
+        let mut trajectory_paths = Vec::new();
+        let mut csv_files: Vec<PathBuf> = Vec::new();
+        if let Some(csv) = &spec.trajectory {
+            csv_files.push(inside(csv, &|| "trajectory".to_string())?);
+        }
+        csv_files.extend(options.trajectories.iter().cloned());
+        for file in &csv_files {
+            let bytes = crate::read_limited(file, options.limits.trajectory_bytes)?;
+            let source = sources.len() as u32;
+            sources.push(file.clone());
+            trajectory_paths.push(file.clone());
+            crate::trajectory::parse_rows(&bytes, file, max_frames, |r| {
+                let place = || format!("line {}", r.line);
+                let b = lookup(r.body, file, &place)?;
+                if bodies[b].is_static {
+                    return Err(static_error(b, file, place()));
+                }
+                keys.push(Key {
+                    frame: r.frame,
+                    body: b as u32,
+                    source,
+                    line: r.line.min(u32::MAX as usize) as u32,
+                    pose: r.pose,
+                });
+                Ok(())
+            })?;
+        }
+        if let Some(traj) = extra {
+            let source = sources.len() as u32;
+            sources.push(traj.path.clone());
+            for r in &traj.rows {
+                let place = || format!("line {}", r.line);
+                let b = lookup(&r.body, &traj.path, &place)?;
+                if bodies[b].is_static {
+                    return Err(static_error(b, &traj.path, place()));
+                }
+                if r.frame as u64 >= max_frames {
+                    return Err(Error::Limit {
+                        path: traj.path.clone(),
+                        place: place(),
+                        msg: format!("frame {} is past the limit of {max_frames} frames", r.frame),
+                    });
+                }
+                keys.push(Key {
+                    frame: r.frame as u32,
+                    body: b as u32,
+                    source,
+                    line: r.line.min(u32::MAX as usize) as u32,
+                    pose: r.pose,
+                });
+            }
+        }
+        if keys.len() > u32::MAX as usize {
+            return Err(Error::Limit {
+                path: path.into(),
+                place: "trajectory".into(),
+                msg: format!("{} poses: more than u32 indices address", keys.len()),
             });
         }
+        // Sorted by (frame, body), file order kept for ties, so a body given twice in one frame
+        // is two neighbours: name both places.
+        keys.sort_by_key(|k| (k.frame, k.body, k.source, k.line));
+        let place_of = |k: &Key| {
+            if k.source == 0 {
+                format!("frame {}", k.line)
+            } else {
+                format!("line {}", k.line)
+            }
+        };
+        for w in keys.windows(2) {
+            if w[0].frame == w[1].frame && w[0].body == w[1].body {
+                let (first, second) = (&w[0], &w[1]);
+                return Err(Error::Invalid {
+                    path: sources[second.source as usize].clone(),
+                    msg: format!(
+                        "{}: body '{}' in frame {} was already given a pose ({}: {})",
+                        place_of(second),
+                        bodies[second.body as usize].name,
+                        second.frame,
+                        sources[first.source as usize].display(),
+                        place_of(first)
+                    ),
+                });
+            }
+        }
+        let mut by_body: Vec<Vec<u32>> = vec![Vec::new(); bodies.len()];
+        for (i, k) in keys.iter().enumerate() {
+            by_body[k.body as usize].push(i as u32);
+        }
+        let frame_count = keys
+            .last()
+            .map_or(0, |k| k.frame as usize + 1)
+            .max(spec.frames.len())
+            .max(1);
         Ok(Self {
             path: path.into(),
             bodies,
             meshes,
             mesh_paths,
+            trajectory_paths,
             exclude,
-            frames,
+            keys,
+            by_body,
+            frame_count,
         })
+    }
+
+    fn initial_poses(&self) -> Vec<Pose> {
+        self.bodies.iter().map(|b| b.initial_pose).collect()
     }
 
     /// The scene file this scene was loaded from.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// Every file the scene was read from: the scene file, its meshes, its trajectories (for
+    /// refusing to write a report over one of them).
+    pub fn input_paths(&self) -> Vec<PathBuf> {
+        let mut v = vec![self.path.clone()];
+        v.extend(self.mesh_paths.iter().cloned());
+        v.extend(self.trajectory_paths.iter().cloned());
+        v
+    }
+
+    /// The trajectory CSV files merged into the frames.
+    pub fn trajectory_paths(&self) -> &[PathBuf] {
+        &self.trajectory_paths
     }
 
     /// The bodies, in file order.
@@ -447,18 +707,104 @@ impl Scene {
         self.exclude.binary_search(&(a.min(b), a.max(b))).is_ok()
     }
 
-    /// The frames (at least one: a scene without frames has the initial poses as its frame).
-    pub fn frames(&self) -> &[Frame] {
-        &self.frames
+    /// The frames (at least one: a scene without frames has the initial poses as its frame),
+    /// expanded on demand: `scene.frames().iter()` walks them in order at O(bodies) each.
+    pub fn frames(&self) -> Frames<'_> {
+        Frames { scene: self }
     }
 
-    /// Number of frames.
+    /// Frame `k` expanded: every body's pose (its latest pose given at a frame `<= k`, else its
+    /// initial pose) and the bodies whose pose changed at `k`. O(bodies · log poses).
+    ///
+    /// # Panics
+    /// When `k >= frame_count()` (use [`Frames::get`] for a checked lookup).
+    pub fn frame(&self, k: usize) -> Frame {
+        assert!(
+            k < self.frame_count,
+            "frame {k} of a scene with {} frames",
+            self.frame_count
+        );
+        let mut poses = self.initial_poses();
+        let mut moved = Vec::new();
+        for (b, list) in self.by_body.iter().enumerate() {
+            let n = list.partition_point(|&i| self.keys[i as usize].frame as usize <= k);
+            if n == 0 {
+                continue;
+            }
+            let key = &self.keys[list[n - 1] as usize];
+            let before = if n >= 2 {
+                self.keys[list[n - 2] as usize].pose
+            } else {
+                self.bodies[b].initial_pose
+            };
+            poses[b] = key.pose;
+            if key.frame as usize == k && key.pose != before {
+                moved.push(b);
+            }
+        }
+        Frame { poses, moved }
+    }
+
+    /// Number of frames: one past the largest frame index given (in the scene's `frames` or a
+    /// trajectory row), at least 1.
     pub fn frame_count(&self) -> usize {
-        self.frames.len()
+        self.frame_count
+    }
+
+    /// Number of poses stored (one per pose given in the files): what the frames' memory grows
+    /// with.
+    pub fn pose_count(&self) -> usize {
+        self.keys.len()
     }
 
     /// Total triangles over all bodies (a body's mesh counted once per body).
     pub fn triangle_count(&self) -> usize {
         self.bodies.iter().map(|b| b.mesh.triangle_count()).sum()
+    }
+}
+
+/// `file` (as a scene gives it) joined to the scene's folder, refused when it leads outside
+/// that folder and `allow_outside` is off: an absolute path, `..` past the folder, or a
+/// symbolic link whose target is outside.
+fn resolve_inside(
+    scene: &Path,
+    base: &Path,
+    file: &str,
+    allow_outside: bool,
+    what: &dyn Fn() -> String,
+) -> Result<PathBuf> {
+    let joined = base.join(file);
+    if allow_outside {
+        return Ok(joined);
+    }
+    let outside = || Error::OutsideSceneFolder {
+        path: scene.into(),
+        what: what(),
+        file: file.into(),
+        folder: base.into(),
+    };
+    if Path::new(file).is_absolute() {
+        return Err(outside());
+    }
+    let folder = std::fs::canonicalize(base).map_err(|e| Error::io(base, e))?;
+    match std::fs::canonicalize(&joined) {
+        Ok(real) if real.starts_with(&folder) => Ok(joined),
+        Ok(_) => Err(outside()),
+        // Missing file: judge by the words (no `..` may climb above the folder), and let the
+        // read report the missing file.
+        Err(_) => {
+            let mut depth = 0i64;
+            for c in Path::new(file).components() {
+                match c {
+                    std::path::Component::ParentDir => depth -= 1,
+                    std::path::Component::Normal(_) => depth += 1,
+                    _ => {}
+                }
+                if depth < 0 {
+                    return Err(outside());
+                }
+            }
+            Ok(joined)
+        }
     }
 }

@@ -5,7 +5,7 @@ use frcd_geom::TriMesh;
 use std::fmt::Write as _;
 use std::path::Path;
 
-/// Writes a binary STL file (f32 coordinates: values are rounded to the nearest f32; vertices
+/// Writes a binary STL file atomically (see [`crate::write_atomic`]) (f32 coordinates: values are rounded to the nearest f32; vertices
 /// that share an f64 position share the f32 one, so welding on load restores the topology).
 pub fn write_stl_binary(path: impl AsRef<Path>, mesh: &TriMesh) -> Result<()> {
     let path = path.as_ref();
@@ -20,13 +20,12 @@ pub fn write_stl_binary(path: impl AsRef<Path>, mesh: &TriMesh) -> Result<()> {
             }
         })
         .collect();
-    let mut file =
-        std::io::BufWriter::new(std::fs::File::create(path).map_err(|e| Error::io(path, e))?);
-    stl_io::write_stl(&mut file, triangles.iter()).map_err(|e| Error::io(path, e))?;
-    std::io::Write::flush(&mut file).map_err(|e| Error::io(path, e))
+    let mut bytes = Vec::with_capacity(84 + 50 * triangles.len());
+    stl_io::write_stl(&mut bytes, triangles.iter()).map_err(|e| Error::io(path, e))?;
+    crate::write_atomic(path, &bytes)
 }
 
-/// Writes a Wavefront OBJ file with one object named `name`. Coordinates are written in Rust's
+/// Writes a Wavefront OBJ file atomically with one object named `name`. Coordinates are written in Rust's
 /// shortest form that reads back to the same f64, so the file round-trips exactly.
 pub fn write_obj(path: impl AsRef<Path>, mesh: &TriMesh, name: &str) -> Result<()> {
     let path = path.as_ref();
@@ -43,5 +42,5 @@ pub fn write_obj(path: impl AsRef<Path>, mesh: &TriMesh, name: &str) -> Result<(
     for [a, b, c] in mesh.indices() {
         let _ = writeln!(s, "f {} {} {}", a + 1, b + 1, c + 1);
     }
-    std::fs::write(path, s).map_err(|e| Error::io(path, e))
+    crate::write_atomic(path, s.as_bytes())
 }

@@ -39,13 +39,13 @@ fn bogie_scene_loads() {
         assert!(m.report().degenerate.is_empty());
     }
     // Frame 0 repeats the initial poses; every later frame moves every body but the track.
-    assert!(s.frames()[0].moved.is_empty());
-    for f in &s.frames()[1..] {
+    assert!(s.frame(0).moved.is_empty());
+    for f in s.frames().iter().skip(1) {
         assert_eq!(f.moved.len(), 18);
         assert!(!f.moved.contains(&track));
     }
     // 1 kHz at 25 m/s: 25 mm per frame along the track.
-    let d = s.frames()[1].poses[w1].translation - s.frames()[0].poses[w1].translation;
+    let d = s.frame(1).poses[w1].translation - s.frame(0).poses[w1].translation;
     assert!((d.length() - 0.025).abs() < 1e-4, "{d}");
 }
 
@@ -57,7 +57,7 @@ fn bogie_schedule_matches_the_oracle() {
     assert!(expected.pairs.len() >= 3, "the demo must really interfere");
     let oracle = |frame: usize, a: &str, b: &str| {
         let (i, j) = (s.body_index(a).unwrap(), s.body_index(b).unwrap());
-        let f = &s.frames()[frame];
+        let f = &s.frame(frame);
         let (bi, bj) = (&s.bodies()[i], &s.bodies()[j]);
         frcd_obb::oracle::answer(&bi.mesh, &f.poses[i], &bj.mesh, &f.poses[j], true)
     };

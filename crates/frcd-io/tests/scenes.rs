@@ -51,7 +51,7 @@ fn scene_loads_shares_meshes_and_carries_poses_forward() {
     assert!(s.bodies()[0].is_static && !s.bodies()[1].is_static);
     assert!(s.is_excluded(0, 2) && s.is_excluded(2, 0) && !s.is_excluded(0, 1));
     assert_eq!(s.frame_count(), 3);
-    let f = s.frames();
+    let f: Vec<_> = s.frames().iter().collect();
     assert_eq!(f[0].poses[1].translation, DVec3::new(0.0, 0.0, 0.5));
     assert_eq!(f[0].moved, vec![1]);
     // Frame 1 lists nothing: everything carried forward.
@@ -62,7 +62,7 @@ fn scene_loads_shares_meshes_and_carries_poses_forward() {
     assert_eq!(f[2].poses[2].translation.x, 1.0);
     // The initial quaternion was normalised.
     assert!((s.bodies()[2].initial_pose.rotation.length() - 1.0).abs() < 1e-15);
-    assert_eq!(s.frames()[0].poses[2], s.bodies()[2].initial_pose);
+    assert_eq!(s.frame(0).poses[2], s.bodies()[2].initial_pose);
 }
 
 #[test]
@@ -80,10 +80,10 @@ fn trajectory_csv_merges_into_frames() {
     );
     let s = Scene::load(&path).unwrap();
     assert_eq!(s.frame_count(), 5);
-    assert_eq!(s.frames()[3].moved, vec![1]);
-    assert_eq!(s.frames()[3].poses[2].translation.x, 1.0);
-    assert_eq!(s.frames()[4].poses[2].translation.x, 3.0);
-    assert_eq!(s.frames()[4].poses[1].translation.y, 1.0);
+    assert_eq!(s.frame(3).moved, vec![1]);
+    assert_eq!(s.frame(3).poses[2].translation.x, 1.0);
+    assert_eq!(s.frame(4).poses[2].translation.x, 3.0);
+    assert_eq!(s.frame(4).poses[1].translation.y, 1.0);
     // An extra CSV that repeats a body in a frame the scene already sets is refused, naming both.
     let extra = write(
         &dir,
@@ -263,6 +263,7 @@ fn report_json_csv_and_summary() {
                 triangle_pairs: index as u64,
                 contained: false,
                 segments: vec![],
+                triangles: vec![[0, 1]],
             });
         }
         if index == 5 {
@@ -272,6 +273,7 @@ fn report_json_csv_and_summary() {
                 triangle_pairs: 0,
                 contained: true,
                 segments: vec![[[0.0; 3], [1.0, 0.0, 0.0]]],
+                triangles: vec![],
             });
         }
         r.frames.push(FrameReport {

@@ -85,6 +85,7 @@ fn featuretype_has_576_boundary_edges_under_exact_welding() {
         dir.join("mechanical_trimesh/featuretype.STL"),
         &LoadOptions {
             weld_tolerance: 1e-5,
+            ..LoadOptions::default()
         },
     )
     .unwrap();

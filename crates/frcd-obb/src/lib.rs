@@ -21,6 +21,7 @@
 //! same f64 operations ([`RelativeFrame`]).
 #![warn(missing_docs)]
 
+mod checked;
 pub mod oracle;
 mod query;
 mod sat;
@@ -28,6 +29,7 @@ mod solid;
 mod tree;
 mod world;
 
+pub use checked::{PairSide, QueryError, try_collide, try_collide_cached};
 pub use frcd_geom::fit::FitMethod;
 pub use frcd_tritri::{Contact, Method};
 pub use query::{

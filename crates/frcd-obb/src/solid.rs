@@ -65,6 +65,53 @@ fn direction(seed: u64, k: u32) -> DVec3 {
     }
 }
 
+/// The far end `q` of a parity segment from `p` (inside `bounds`) along `dir` (major axis ±1,
+/// minor components within ±0.1): a finite point outside `bounds`, at any finite magnitude.
+///
+/// The segment need not be exactly `p + s·dir`: parity counts crossings of any segment from `p`
+/// to a point outside the closed mesh, and a closed mesh lies inside `bounds`. So `q` leaves the
+/// box through the face the major axis points at, by as much again as `p` is from that face,
+/// computed so nothing overflows (the old `2·|max - min|` reach overflowed from extents of about
+/// 1e154 and made every point "outside"). `None` when no finite point lies beyond that face
+/// (the box reaches ±f64::MAX there): the caller tries another direction.
+fn ray_end(p: DVec3, dir: DVec3, bounds: &Aabb) -> Option<DVec3> {
+    let axis = if dir.x.abs() == 1.0 {
+        0
+    } else if dir.y.abs() == 1.0 {
+        1
+    } else {
+        2
+    };
+    let sign = dir[axis];
+    let face = if sign > 0.0 {
+        bounds.max[axis]
+    } else {
+        bounds.min[axis]
+    };
+    // Half-distances never overflow; `p` and the face have the same sign relation as `sign`.
+    let half = (face * 0.5 - p[axis] * 0.5).abs();
+    let mut end = face + sign * (half.max(f64::MIN_POSITIVE) * 2.0).max(face.abs() * 1e-3);
+    if !end.is_finite() {
+        end = sign * f64::MAX;
+    }
+    if (sign > 0.0 && end <= face) || (sign < 0.0 && end >= face) {
+        return None;
+    }
+    // The travel along the major axis, halved so it stays finite; the minor components follow
+    // it and are clamped to the finite range (the segment stays generic, which is all parity
+    // needs).
+    let travel_half = (end * 0.5 - p[axis] * 0.5).abs();
+    let mut q = p;
+    q[axis] = end;
+    for m in 0..3 {
+        if m != axis {
+            let v = p[m] + (2.0 * dir[m]) * travel_half;
+            q[m] = v.clamp(-f64::MAX, f64::MAX);
+        }
+    }
+    Some(q)
+}
+
 /// Parity of the number of triangles a ray from `p` crosses: `Some(true)` when `p` is inside the
 /// closed mesh whose `n` triangles `tri(i)` returns, `None` when every tried ray was degenerate.
 /// `bounds` must hold every triangle. `p` must not lie on the surface (callers test this first:
@@ -79,10 +126,10 @@ pub(crate) fn point_inside(
     if !bounds.contains_point(p) {
         return Some(false);
     }
-    // Far enough that q is outside the bounds whatever the direction (|dir| >= 1 per axis-major).
-    let reach = 2.0 * (bounds.max - bounds.min).length() + 1.0;
     'rays: for k in 0..MAX_RAYS {
-        let q = p + direction(seed, k) * reach;
+        let Some(q) = ray_end(p, direction(seed, k), bounds) else {
+            continue 'rays;
+        };
         let seg = Aabb::new(p.min(q), p.max(q));
         let mut crossings = 0u32;
         for i in 0..n {
@@ -137,6 +184,69 @@ mod tests {
                 point_inside(DVec3::new(0.0, 0.0, 0.99), 12, |i| tris[i], &c.aabb(), seed),
                 Some(true)
             );
+        }
+    }
+}
+
+#[cfg(test)]
+mod magnitude_tests {
+    use super::*;
+    use frcd_geom::shapes;
+
+    /// Regression (issue 11): extents of 1e154 and more overflowed the ray reach to infinity,
+    /// and every point was reported outside.
+    #[test]
+    fn parity_is_right_at_any_finite_magnitude() {
+        for s in [1.0, 1e154, 1e200, 1e300, 8.9e307] {
+            let c = shapes::cuboid(DVec3::splat(s));
+            let tris: Vec<Triangle> = c.triangles().collect();
+            let b = c.aabb();
+            for seed in 0..8 {
+                for (p, inside) in [
+                    (DVec3::ZERO, true),
+                    (DVec3::new(0.5 * s, -0.25 * s, 0.75 * s), true),
+                    (DVec3::new(-0.999 * s, 0.999 * s, -0.999 * s), true),
+                    (DVec3::new(1.5 * s, 0.0, 0.0), false),
+                    (DVec3::new(0.0, 0.0, -1.001 * s), false),
+                ] {
+                    assert_eq!(
+                        point_inside(p, tris.len(), |i| tris[i], &b, seed),
+                        Some(inside),
+                        "extent {s:e}, point {p}, seed {seed}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_box_reaching_the_largest_finite_value_still_gets_an_answer() {
+        // The +x face is at f64::MAX: rays that point that way have no finite end beyond it and
+        // are skipped; the others decide.
+        let m = f64::MAX;
+        let c = shapes::cuboid(DVec3::splat(m / 2.0)).transformed(
+            &frcd_geom::Pose::from_translation(DVec3::new(m / 2.0, 0.0, 0.0)),
+        );
+        let tris: Vec<Triangle> = c.triangles().collect();
+        let b = c.aabb();
+        assert_eq!(b.max.x, m);
+        for seed in 0..4 {
+            let p = DVec3::new(m / 2.0, m / 4.0, 0.0);
+            assert_eq!(
+                point_inside(p, tris.len(), |i| tris[i], &b, seed),
+                Some(true)
+            );
+        }
+    }
+
+    #[test]
+    fn ray_ends_are_finite_and_outside_the_box() {
+        let b = Aabb::new(DVec3::splat(-1e300), DVec3::splat(1e300));
+        for k in 0..MAX_RAYS {
+            let d = direction(7, k);
+            let q = ray_end(DVec3::new(1e300, -1e300, 0.0), d, &b).expect("room beyond the box");
+            assert!(q.is_finite(), "{q}");
+            assert!(!b.contains_point(q), "{q} inside");
         }
     }
 }
