@@ -206,9 +206,9 @@ impl GpuContext {
             let out_bytes = bufs.output_cap as u64 * 8;
             enc.copy_buffer_to_buffer(&bufs.count, 0, &bufs.staging, 0, 4);
             enc.copy_buffer_to_buffer(&bufs.out, 0, &bufs.staging, 8, out_bytes);
-            self.submit(enc.finish());
+            let index = self.submit(enc.finish());
             answer.submissions += 1;
-            let bytes = self.read_back(&bufs.staging, 8 + out_bytes)?;
+            let bytes = self.read_back(&bufs.staging, 8 + out_bytes, index)?;
             answer.readbacks += 1;
             let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
             let count = words[0];

@@ -1,4 +1,4 @@
-//! CPU-only: every WGSL file in shaders/gpgpu parses and validates with naga, and the crate
+//! CPU-only: every WGSL file in crates/frcd-gpgpu/shaders parses and validates with naga, and the crate
 //! embeds each of them.
 
 use std::path::PathBuf;
@@ -16,9 +16,9 @@ fn validate(name: &str, src: &str) {
 
 #[test]
 fn every_wgsl_file_validates_with_naga() {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shaders/gpgpu");
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("shaders");
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .expect("shaders/gpgpu exists")
+        .expect("crates/frcd-gpgpu/shaders exists")
         .map(|e| e.expect("readable entry").path())
         .filter(|p| p.extension().is_some_and(|e| e == "wgsl"))
         .collect();

@@ -219,9 +219,9 @@ pub struct ImageDetector {
 }
 
 /// The WGSL sources of the detector (also validated by a CPU-only naga test).
-pub const RASTER_WGSL: &str = include_str!("../../../shaders/image/raster.wgsl");
+pub const RASTER_WGSL: &str = include_str!("../shaders/raster.wgsl");
 /// The resolve compute shader.
-pub const RESOLVE_WGSL: &str = include_str!("../../../shaders/image/resolve.wgsl");
+pub const RESOLVE_WGSL: &str = include_str!("../shaders/resolve.wgsl");
 
 /// The driver's full description of a wgpu error (its `Display` is only the kind).
 fn describe(e: &wgpu::Error) -> String {

@@ -17,6 +17,12 @@ fn detector() -> Option<&'static ImageDetector> {
                 eprintln!("frcd-image tests on {}", d.context().adapter_name());
                 Some(d)
             }
+            // A backend the detector cannot use (GL) is refused at creation, by design: the
+            // refusal itself is what `gl_is_refused_at_context_creation` checks.
+            Err(e @ ImageError::UnsupportedBackend { .. }) => {
+                eprintln!("SKIP frcd-image GPU tests (refused, typed): {e}");
+                None
+            }
             Err(e) if !required => {
                 eprintln!("SKIP frcd-image GPU tests: {e}");
                 None
@@ -588,4 +594,40 @@ fn disjoint_boxes_answer_without_gpu_work_and_errors_are_typed() {
             Err(ImageError::NotSolid { .. })
         ));
     });
+}
+
+/// Issue 11: wgpu's GL backend cannot run the detector (GLSL has no depth `textureLoad`); it is
+/// refused with a typed error when the context is made, never later and never with an answer.
+/// Vulkan (lavapipe here) is accepted. Runs on whichever of the two the machine has.
+#[test]
+fn gl_is_refused_at_context_creation() {
+    for backends in [wgpu::Backends::GL, wgpu::Backends::VULKAN] {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = backends;
+        match frcd_image::GpuContext::headless_with(desc) {
+            Err(ImageError::NoAdapter(e)) => println!("SKIP {backends:?}: {e}"),
+            Err(ImageError::UnsupportedBackend { backend, .. }) => {
+                assert_eq!(backend, wgpu::Backend::Gl);
+                assert_eq!(backends, wgpu::Backends::GL);
+            }
+            Err(e) => panic!("{backends:?}: unexpected error {e}"),
+            Ok(ctx) => {
+                assert_ne!(backends, wgpu::Backends::GL, "GL must be refused");
+                // And it works: a real query on the accepted backend.
+                let det = ImageDetector::new(ctx).expect("pipelines");
+                let a = det.upload("a", &shapes::cuboid(DVec3::splat(0.5))).unwrap();
+                let r = det
+                    .query(
+                        &mut ImageScratch::default(),
+                        &a,
+                        &Pose::IDENTITY,
+                        &a,
+                        &Pose::from_translation(DVec3::new(0.5, 0.1, 0.0)),
+                        &opts(64),
+                    )
+                    .unwrap();
+                assert!(r.collide && r.volume > 0.3 && r.volume < 0.7, "{}", r.volume);
+            }
+        }
+    }
 }

@@ -1,16 +1,16 @@
-//! CPU-only: every shaders/image/*.wgsl parses and validates with naga, and the crate embeds
+//! CPU-only: every crates/frcd-image/shaders/*.wgsl parses and validates with naga, and the crate embeds
 //! every one of them.
 
 use std::path::PathBuf;
 
 fn shader_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shaders/image")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("shaders")
 }
 
 #[test]
 fn every_wgsl_file_validates_with_naga() {
     let mut files: Vec<PathBuf> = std::fs::read_dir(shader_dir())
-        .expect("shaders/image exists")
+        .expect("crates/frcd-image/shaders exists")
         .map(|e| e.unwrap().path())
         .filter(|p| p.extension().is_some_and(|e| e == "wgsl"))
         .collect();
