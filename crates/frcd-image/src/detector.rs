@@ -170,11 +170,25 @@ pub struct ImageResult {
     pub colliding_set: Option<CollidingSet>,
 }
 
-/// Caller-owned per-query GPU state (textures and buffers sized to the last image). Reused across
-/// queries of the same size; create one per thread with [`ImageScratch::default`].
+/// Caller-owned per-query GPU state: square targets and buffers of the largest resolution used
+/// so far, allocated once and reused by every query that fits (whatever the overlap's aspect
+/// ratio); create one per thread with [`ImageScratch::default`].
 #[derive(Debug, Default)]
 pub struct ImageScratch {
     inner: Option<Scratch>,
+    allocations: u32,
+}
+
+impl ImageScratch {
+    /// Size `(width, height)` in pixels of the targets held now (`None` before the first query).
+    pub fn capacity(&self) -> Option<(u32, u32)> {
+        self.inner.as_ref().map(|s| (s.width, s.height))
+    }
+
+    /// How many times targets were allocated (once per larger resolution).
+    pub fn allocations(&self) -> u32 {
+        self.allocations
+    }
 }
 
 #[derive(Debug)]
@@ -637,10 +651,21 @@ impl ImageDetector {
         }
     }
 
-    fn scratch<'s>(&self, scratch: &'s mut ImageScratch, w: u32, h: u32) -> &'s Scratch {
-        let fits = matches!(&scratch.inner, Some(s) if s.detector == self.id && s.width == w && s.height == h);
+    /// The scratch's targets are square, `side` pixels (the query's resolution) or more, and
+    /// are kept for every later image that fits: a query renders into the `w × h` corner
+    /// (viewport and scissor), so a changing overlap aspect ratio reallocates nothing.
+    fn scratch<'s>(
+        &self,
+        scratch: &'s mut ImageScratch,
+        w: u32,
+        h: u32,
+        side: u32,
+    ) -> &'s Scratch {
+        let fits = matches!(&scratch.inner, Some(s) if s.detector == self.id && s.width >= w && s.height >= h);
         if !fits {
-            scratch.inner = Some(self.make_scratch(w, h));
+            let side = side.max(w).max(h);
+            scratch.inner = Some(self.make_scratch(side, side));
+            scratch.allocations += 1;
         }
         scratch.inner.as_ref().expect("just made")
     }
@@ -827,7 +852,7 @@ impl ImageDetector {
         options: &ImageOptions,
     ) -> Result<(Vec<f32>, Vec<u32>, [u32; 2]), ImageError> {
         let (w, h) = (view.width, view.height);
-        let s = self.scratch(scratch, w, h);
+        let s = self.scratch(scratch, w, h, options.resolution);
         let device = self.ctx.device();
         let queue = self.ctx.queue();
         let mats = [
@@ -918,6 +943,8 @@ impl ImageDetector {
                         occlusion_query_set: None,
                         multiview_mask: None,
                     });
+                    pass.set_viewport(0.0, 0.0, w as f32, h as f32, 0.0, 1.0);
+                    pass.set_scissor_rect(0, 0, w, h);
                     // Peel: the nearest surface of X strictly behind the previous layer.
                     pass.set_pipeline(&self.peel);
                     pass.set_bind_group(0, &s.draw_bg[c], &[]);
@@ -940,9 +967,10 @@ impl ImageDetector {
                 }
                 enc.copy_buffer_to_buffer(&chain.counters, 0, &s.counter_readback, c as u64 * 8, 8);
             }
-            queue.submit([enc.finish()]);
+            let index = queue.submit([enc.finish()]);
             let counts: Vec<u32> =
-                bytemuck::cast_slice(&read_buffer(device, &s.counter_readback, 16)?).to_vec();
+                bytemuck::cast_slice(&read_buffer(device, &s.counter_readback, 16, index)?)
+                    .to_vec();
             for c in 0..2 {
                 if active[c] {
                     if counts[2 * c] == 0 {
@@ -966,8 +994,8 @@ impl ImageDetector {
         let bytes = w as u64 * h as u64 * 4;
         enc.copy_buffer_to_buffer(&s.lengths, 0, &s.readback, 0, bytes);
         enc.copy_buffer_to_buffer(&s.mask, 0, &s.readback, bytes, bytes);
-        queue.submit([enc.finish()]);
-        let raw = read_buffer(device, &s.readback, bytes * 2)?;
+        let index = queue.submit([enc.finish()]);
+        let raw = read_buffer(device, &s.readback, bytes * 2, index)?;
         let lengths: Vec<f32> = bytemuck::pod_collect_to_vec(&raw[..bytes as usize]);
         let mask: Vec<u32> = bytemuck::pod_collect_to_vec(&raw[bytes as usize..]);
         Ok((lengths, mask, layers))
@@ -988,11 +1016,13 @@ pub fn check_solid(name: &str, mesh: &TriMesh) -> Result<(), ImageError> {
     }
 }
 
-/// Maps `size` bytes of `buffer`, copies them out and unmaps.
+/// Maps `size` bytes of `buffer` after submission `index` (waiting for that submission only, not
+/// for an engine's other work on the device), copies them out and unmaps.
 fn read_buffer(
     device: &wgpu::Device,
     buffer: &wgpu::Buffer,
     size: u64,
+    index: wgpu::SubmissionIndex,
 ) -> Result<Vec<u8>, ImageError> {
     let slice = buffer.slice(..size);
     let (tx, rx) = std::sync::mpsc::channel();
@@ -1000,11 +1030,25 @@ fn read_buffer(
         let _ = tx.send(r);
     });
     device
-        .poll(wgpu::PollType::wait_indefinitely())
+        .poll(wgpu::PollType::Wait {
+            submission_index: Some(index),
+            timeout: None,
+        })
         .map_err(|e| gpu_err("poll")(e.to_string()))?;
-    rx.recv()
-        .map_err(|e| gpu_err("readback")(e.to_string()))?
-        .map_err(|e| gpu_err("readback")(e.to_string()))?;
+    // Another thread's poll may hold the callback: poll without waiting until it has run.
+    let mapped = loop {
+        match rx.try_recv() {
+            Ok(r) => break r,
+            Err(std::sync::mpsc::TryRecvError::Empty) => {
+                device
+                    .poll(wgpu::PollType::Poll)
+                    .map_err(|e| gpu_err("poll")(e.to_string()))?;
+                std::thread::yield_now();
+            }
+            Err(e) => return Err(gpu_err("readback")(e.to_string())),
+        }
+    };
+    mapped.map_err(|e| gpu_err("readback")(e.to_string()))?;
     let out = slice
         .get_mapped_range()
         .map_err(|e| gpu_err("readback")(e.to_string()))?
