@@ -7,22 +7,7 @@
 
 const WG: u32 = 64u;
 
-struct Params {
-    // frontier capacity, output capacity, max workgroups per dimension, pairs in the batch
-    caps: vec4<u32>,
-}
-
-// Same layout as in traverse.wgsl.
-struct State {
-    cur: u32,
-    next: atomic<u32>,
-    out: atomic<u32>,
-    needed: u32,
-    levels: u32,
-    pairs_tested: u32,
-    pad0: u32,
-    pad1: u32,
-}
+// State and Params come from the prelude (frcd-gpu).
 
 @group(0) @binding(0) var<storage, read_write> state: State;
 @group(0) @binding(1) var<storage, read_write> args: array<u32, 3>;

@@ -46,44 +46,7 @@ const U: f32 = 1.1920929e-7;
 const TAU: f32 = 1.1754944e-38;
 const UNCERTAIN_FLAG: u32 = 0x80000000u;
 
-struct Arena {
-    // items per texture row, rows per layer, unused, unused
-    node_layout: vec4<u32>,
-    tri_layout: vec4<u32>,
-}
-
-// One body pair of the batch: the relative pose (rows of R: B local -> A local, and t; w
-// unused) and the item bases of the two meshes in the arena.
-struct PairInfo {
-    r0: vec4<f32>,
-    r1: vec4<f32>,
-    r2: vec4<f32>,
-    t: vec4<f32>,
-    // A's first node, A's first triangle, B's first node, B's first triangle
-    base: vec4<u32>,
-}
-
-struct Params {
-    // frontier capacity, output capacity, max workgroups per dimension, pairs in the batch
-    caps: vec4<u32>,
-}
-
-// Shared with control.wgsl (same layout).
-struct State {
-    // Entries in the current frontier (set by the control pass).
-    cur: u32,
-    // Entries appended to the next frontier (may exceed the capacity: overflow).
-    next: atomic<u32>,
-    // Triangle pairs appended to the output (may exceed the capacity: overflow).
-    out: atomic<u32>,
-    // Largest frontier size requested so far (control pass).
-    needed: u32,
-    // Levels that had work, and node pairs tested in total (control pass).
-    levels: u32,
-    pairs_tested: u32,
-    pad0: u32,
-    pad1: u32,
-}
+// State, Params, Arena and PairInfo come from the prelude (frcd-gpu).
 
 @group(0) @binding(0) var nodes: texture_2d_array<f32>;
 @group(0) @binding(1) var tris: texture_2d_array<f32>;

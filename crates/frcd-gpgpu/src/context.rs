@@ -213,11 +213,7 @@ impl GpuContext {
         let arena = crate::mesh::Arena::new(&device, &pipes.arena_bgl, &limits, arena);
         if let Some(e) = pollster::block_on(scope.pop()) {
             // Display of a wgpu error is only its kind; the description names the cause.
-            let reason = match &e {
-                wgpu::Error::Validation { description, .. }
-                | wgpu::Error::Internal { description, .. } => description.clone(),
-                other => other.to_string(),
-            };
+            let reason = frcd_gpu::describe(&e);
             return Err(GpuError::Pipeline {
                 adapter: info.name.clone(),
                 reason,
@@ -310,40 +306,7 @@ impl GpuContext {
         index: wgpu::SubmissionIndex,
     ) -> Result<Vec<u8>, GpuError> {
         self.readbacks.fetch_add(1, Ordering::Relaxed);
-        let slice = staging.slice(..len);
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
-        self.device
-            .poll(wgpu::PollType::Wait {
-                submission_index: Some(index),
-                timeout: None,
-            })
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        // The map callback runs at the latest by the poll that saw the submission finish; a
-        // missing callback means another thread's poll has it pending: poll without waiting.
-        let result = loop {
-            match rx.try_recv() {
-                Ok(r) => break r,
-                Err(std::sync::mpsc::TryRecvError::Empty) => {
-                    self.device
-                        .poll(wgpu::PollType::Poll)
-                        .map_err(|e| GpuError::Readback(e.to_string()))?;
-                    std::thread::yield_now();
-                }
-                Err(e) => return Err(GpuError::Readback(e.to_string())),
-            }
-        };
-        result.map_err(|e| GpuError::Readback(e.to_string()))?;
-        let bytes = {
-            let view = slice
-                .get_mapped_range()
-                .map_err(|e| GpuError::Readback(format!("{e:?}")))?;
-            view.to_vec()
-        };
-        staging.unmap();
-        Ok(bytes)
+        frcd_gpu::read_back(&self.device, staging, len, index).map_err(GpuError::Readback)
     }
 
     /// Largest byte size of one storage buffer binding.
@@ -463,7 +426,7 @@ impl Pipelines {
         let module = |label: &str, src: &str| {
             device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(label),
-                source: wgpu::ShaderSource::Wgsl(src.into()),
+                source: wgpu::ShaderSource::Wgsl(frcd_gpu::with_prelude(src).into()),
             })
         };
         let traverse_mod = module("traverse.wgsl", shaders::TRAVERSE);

@@ -81,8 +81,8 @@ pub enum GpuError {
     #[error("{0} belongs to another GpuContext")]
     ForeignObject(&'static str),
     /// Reading results back failed (device lost, mapping error).
-    #[error("GPU readback failed: {0}")]
-    Readback(String),
+    #[error("GPU readback failed")]
+    Readback(#[source] frcd_gpu::SetupError),
     /// The GPU reported a state that the traversal cannot produce (a bug, or a broken driver).
     #[error("GPU traversal inconsistency: {0}")]
     Internal(String),

@@ -1,17 +1,18 @@
 use crate::{GpuContext, GpuError, GpuMesh};
 use frcd_geom::{Pose, Triangle};
+use frcd_gpu::layout::{PairInfo, Params, State};
 use frcd_obb::RelativeFrame;
 use frcd_tritri::Method;
 use std::sync::Arc;
 
 /// Bit 31 of an output entry's third word: the GPU could not decide the pair.
 const UNCERTAIN_FLAG: u32 = 0x8000_0000;
-/// Bytes of the `State` struct shared with the shaders.
-const STATE_BYTES: u64 = 32;
+/// Bytes of the `State` struct shared with the shaders (prelude).
+const STATE_BYTES: u64 = std::mem::size_of::<State>() as u64;
 /// Bytes of one frontier or output entry (`vec4<u32>`).
 const ENTRY_BYTES: u64 = 16;
-/// Bytes of one `PairInfo` (traverse.wgsl).
-const PAIR_BYTES: u64 = 80;
+/// Bytes of one `PairInfo` (prelude).
+const PAIR_BYTES: u64 = std::mem::size_of::<PairInfo>() as u64;
 /// Re-runs allowed after overflows before giving up (each at least doubles a buffer).
 const MAX_RERUNS: u32 = 32;
 
@@ -223,23 +224,25 @@ impl QueryScratch {
 
 /// A batch checked and converted for the GPU; independent of the meshes' lifetimes.
 struct Prepared {
-    /// `PairInfo` words, 20 per pair.
-    words: Vec<u32>,
+    /// One `PairInfo` per pair.
+    infos: Vec<PairInfo>,
     frames: Vec<RelativeFrame>,
     tris: Vec<(Arc<[Triangle]>, Arc<[Triangle]>)>,
     levels: u32,
 }
 
-/// The relative pose as the shader's words: rows of R, then t (f32, rounded to nearest; the
-/// shaders' error bounds include this rounding), then the meshes' arena bases.
-fn pair_words(frame: &RelativeFrame, a: &GpuMesh, b: &GpuMesh, out: &mut Vec<u32>) {
+/// The relative pose as the shader's `PairInfo`: rows of R, then t (f32, rounded to nearest;
+/// the shaders' error bounds include this rounding), then the meshes' arena bases.
+fn pair_info(frame: &RelativeFrame, a: &GpuMesh, b: &GpuMesh) -> PairInfo {
     let m = frame.m;
-    let f = |x: f64| (x as f32).to_bits();
-    for k in 0..3 {
-        out.extend([f(m.x_axis[k]), f(m.y_axis[k]), f(m.z_axis[k]), 0]);
+    let row = |k: usize| [m.x_axis[k] as f32, m.y_axis[k] as f32, m.z_axis[k] as f32, 0.0];
+    PairInfo {
+        r0: row(0),
+        r1: row(1),
+        r2: row(2),
+        t: [frame.t.x as f32, frame.t.y as f32, frame.t.z as f32, 0.0],
+        base: [a.node_base, a.tri_base, b.node_base, b.tri_base],
     }
-    out.extend([f(frame.t.x), f(frame.t.y), f(frame.t.z), 0]);
-    out.extend([a.node_base, a.tri_base, b.node_base, b.tri_base]);
 }
 
 /// A batch recorded into the caller's command encoder by [`GpuContext::encode_batch`]. Submit
@@ -351,7 +354,7 @@ impl GpuContext {
             });
         }
         let mut p = Prepared {
-            words: Vec::with_capacity(pairs.len() * 20),
+            infos: Vec::with_capacity(pairs.len()),
             frames: Vec::with_capacity(pairs.len()),
             tris: Vec::with_capacity(pairs.len()),
             levels: 0,
@@ -379,7 +382,7 @@ impl GpuContext {
                     limit: crate::pack::MAX_MAGNITUDE,
                 });
             }
-            pair_words(&frame, a, b, &mut p.words);
+            p.infos.push(pair_info(&frame, a, b));
             p.frames.push(frame);
             p.tris.push((a.triangles.clone(), b.triangles.clone()));
             p.levels = p.levels.max(a.depth.max(b.depth));
@@ -402,14 +405,16 @@ impl GpuContext {
         self.queue.write_buffer(
             &bufs.params,
             0,
-            bytemuck::cast_slice(&[bufs.frontier_cap, bufs.output_cap, max_groups, n]),
+            bytemuck::bytes_of(&Params {
+                caps: [bufs.frontier_cap, bufs.output_cap, max_groups, n],
+            }),
         );
         if n == 0 {
             // Still a valid chain: `init` sets an empty frontier.
             self.queue.write_buffer(&bufs.pairs, 0, &[0u8; PAIR_BYTES as usize]);
         } else {
             self.queue
-                .write_buffer(&bufs.pairs, 0, bytemuck::cast_slice(&p.words));
+                .write_buffer(&bufs.pairs, 0, bytemuck::cast_slice(&p.infos));
             let roots: Vec<[u32; 4]> = (0..n).map(|k| [k, 0, 0, 0]).collect();
             self.queue
                 .write_buffer(&bufs.frontier[0], 0, bytemuck::cast_slice(&roots));
@@ -472,8 +477,8 @@ impl GpuContext {
             let out_bytes = bufs.output_cap as u64 * ENTRY_BYTES;
             let bytes = self.read_back(&bufs.staging, STATE_BYTES + out_bytes, index)?;
             answer.readbacks += 1;
-            let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
-            let (cur, out_count, needed) = (words[0], words[2], words[3]);
+            let state: State = bytemuck::pod_read_unaligned(&bytes[..STATE_BYTES as usize]);
+            let (cur, out_count, needed) = (state.cur, state.out, state.needed);
             let mut rerun = false;
             if needed > bufs.frontier_cap {
                 scratch.frontier_cap = needed.max(bufs.frontier_cap.saturating_mul(2));
@@ -503,12 +508,15 @@ impl GpuContext {
                     p.levels
                 )));
             }
-            answer.levels = words[4];
-            answer.node_pairs_tested = words[5] as u64;
-            break words;
+            answer.levels = state.levels;
+            answer.node_pairs_tested = state.pairs_tested as u64;
+            break (state, bytes);
         };
-        let out_count = words[2] as usize;
-        let entries = &words[(STATE_BYTES / 4) as usize..][..out_count * 4];
+        let (state, bytes) = words;
+        let out_count = state.out as usize;
+        let entries: Vec<u32> = bytemuck::pod_collect_to_vec(
+            &bytes[STATE_BYTES as usize..][..out_count * ENTRY_BYTES as usize],
+        );
         let mut results = vec![GpuCollision::default(); p.frames.len()];
         for e in entries.chunks_exact(4) {
             let (k, ia, tag) = (e[0] as usize, e[1], e[2]);

@@ -4,6 +4,8 @@
 use std::path::PathBuf;
 
 fn validate(name: &str, src: &str) {
+    // Every file is compiled with frcd-gpu's prelude in front (the shared structs).
+    let src = &frcd_gpu::with_prelude(src);
     let module = naga::front::wgsl::parse_str(src)
         .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
     naga::valid::Validator::new(

@@ -237,19 +237,7 @@ pub const RASTER_WGSL: &str = include_str!("../shaders/raster.wgsl");
 /// The resolve compute shader.
 pub const RESOLVE_WGSL: &str = include_str!("../shaders/resolve.wgsl");
 
-/// The driver's full description of a wgpu error (its `Display` is only the kind).
-fn describe(e: &wgpu::Error) -> String {
-    match e {
-        wgpu::Error::Validation { description, .. } | wgpu::Error::Internal { description, .. } => {
-            description.clone()
-        }
-        other => other.to_string(),
-    }
-}
-
-fn gpu_err(stage: &'static str) -> impl Fn(String) -> ImageError {
-    move |message| ImageError::Gpu { stage, message }
-}
+use frcd_gpu::describe;
 
 impl ImageDetector {
     /// Builds the pipelines on `ctx`'s device.
@@ -261,11 +249,11 @@ impl ImageDetector {
         let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
         let raster = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("frcd-image raster"),
-            source: wgpu::ShaderSource::Wgsl(RASTER_WGSL.into()),
+            source: wgpu::ShaderSource::Wgsl(frcd_gpu::with_prelude(RASTER_WGSL).into()),
         });
         let resolve_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("frcd-image resolve"),
-            source: wgpu::ShaderSource::Wgsl(RESOLVE_WGSL.into()),
+            source: wgpu::ShaderSource::Wgsl(frcd_gpu::with_prelude(RESOLVE_WGSL).into()),
         });
         let draw_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("frcd-image draw"),
@@ -863,17 +851,17 @@ impl ImageDetector {
             queue.write_buffer(buf, 0, bytemuck::cast_slice(m));
         }
         let region_depth = view.depth_of(view.region.min[view.axis]);
-        let params: [u32; 8] = [
-            w,
-            h,
-            ENTERING_CODE,
-            0,
-            (region_depth as f32).to_bits(),
-            ((view.far - view.near) as f32).to_bits(),
-            0,
-            0,
-        ];
-        queue.write_buffer(&s.params, 0, bytemuck::cast_slice(&params));
+        let params = frcd_gpu::layout::ResolveParams {
+            width: w,
+            height: h,
+            entering_code: ENTERING_CODE,
+            _pad0: 0,
+            depth_ref: region_depth as f32,
+            depth_scale: (view.far - view.near) as f32,
+            _pad1: 0.0,
+            _pad2: 0.0,
+        };
+        queue.write_buffer(&s.params, 0, bytemuck::bytes_of(&params));
         // The first layer peels from just in front of the region: fragments of X in front of it
         // cannot be in A ∩ B (it lies inside both boxes); Y's faces there still count for parity.
         let start_depth = (region_depth - 2f64.powi(-16)).max(0.0) as f32;
@@ -1016,45 +1004,26 @@ pub fn check_solid(name: &str, mesh: &TriMesh) -> Result<(), ImageError> {
     }
 }
 
-/// Maps `size` bytes of `buffer` after submission `index` (waiting for that submission only, not
-/// for an engine's other work on the device), copies them out and unmaps.
+/// Maps `size` bytes of `buffer` after submission `index`, waiting for that submission only
+/// (not for an engine's other work on the device).
 fn read_buffer(
     device: &wgpu::Device,
     buffer: &wgpu::Buffer,
     size: u64,
     index: wgpu::SubmissionIndex,
 ) -> Result<Vec<u8>, ImageError> {
-    let slice = buffer.slice(..size);
-    let (tx, rx) = std::sync::mpsc::channel();
-    slice.map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    device
-        .poll(wgpu::PollType::Wait {
-            submission_index: Some(index),
-            timeout: None,
-        })
-        .map_err(|e| gpu_err("poll")(e.to_string()))?;
-    // Another thread's poll may hold the callback: poll without waiting until it has run.
-    let mapped = loop {
-        match rx.try_recv() {
-            Ok(r) => break r,
-            Err(std::sync::mpsc::TryRecvError::Empty) => {
-                device
-                    .poll(wgpu::PollType::Poll)
-                    .map_err(|e| gpu_err("poll")(e.to_string()))?;
-                std::thread::yield_now();
-            }
-            Err(e) => return Err(gpu_err("readback")(e.to_string())),
+    frcd_gpu::read_back(device, buffer, size, index).map_err(|e| {
+        let mut message = e.to_string();
+        let mut src = std::error::Error::source(&e);
+        while let Some(s) = src {
+            message.push_str(&format!(": {s}"));
+            src = s.source();
         }
-    };
-    mapped.map_err(|e| gpu_err("readback")(e.to_string()))?;
-    let out = slice
-        .get_mapped_range()
-        .map_err(|e| gpu_err("readback")(e.to_string()))?
-        .to_vec();
-    buffer.unmap();
-    Ok(out)
+        ImageError::Gpu {
+            stage: "readback",
+            message,
+        }
+    })
 }
 
 /// Σ over pixels of `area · ½ · max |ℓ_i − ℓ_j|` over 4-neighbours j (outside the image counts

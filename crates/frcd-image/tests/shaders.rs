@@ -17,7 +17,9 @@ fn every_wgsl_file_validates_with_naga() {
     files.sort();
     assert!(!files.is_empty(), "no WGSL files found");
     for path in &files {
-        let src = std::fs::read_to_string(path).unwrap();
+        let file = std::fs::read_to_string(path).unwrap();
+        // Compiled with frcd-gpu's prelude in front (the shared structs).
+        let src = frcd_gpu::with_prelude(&file);
         let module = naga::front::wgsl::parse_str(&src)
             .unwrap_or_else(|e| panic!("{}: {}", path.display(), e.emit_to_string(&src)));
         naga::valid::Validator::new(
