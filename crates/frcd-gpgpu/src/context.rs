@@ -146,26 +146,24 @@ impl GpuContext {
             desc.backends = b;
         }
         let instance = wgpu::Instance::new(desc);
-        let adapter = if options.low_power
-            || options.force_fallback_adapter
-            || options.backends.is_some()
-        {
-            pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-                power_preference: if options.low_power {
-                    wgpu::PowerPreference::LowPower
-                } else {
-                    wgpu::PowerPreference::HighPerformance
-                },
-                force_fallback_adapter: options.force_fallback_adapter,
-                compatible_surface: None,
-                ..Default::default()
-            }))
-        } else {
-            pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
-                &instance, None,
-            ))
-        }
-        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let adapter =
+            if options.low_power || options.force_fallback_adapter || options.backends.is_some() {
+                pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+                    power_preference: if options.low_power {
+                        wgpu::PowerPreference::LowPower
+                    } else {
+                        wgpu::PowerPreference::HighPerformance
+                    },
+                    force_fallback_adapter: options.force_fallback_adapter,
+                    compatible_surface: None,
+                    ..Default::default()
+                }))
+            } else {
+                pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
+                    &instance, None,
+                ))
+            }
+            .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
         let info = adapter.get_info();
         check_downlevel(&adapter.get_downlevel_capabilities(), &info.name)?;
         let limits = adapter.limits();

@@ -222,12 +222,20 @@ fn separated(l: V3, tt: V3, na: &NodeF, bb: &BoxB, hb: V3, s: f32, f: f32) -> bo
     let ra = mad(
         na.h.z,
         dot(na.a[2], l).abs(),
-        mad(na.h.y, dot(na.a[1], l).abs(), mul(na.h.x, dot(na.a[0], l).abs())),
+        mad(
+            na.h.y,
+            dot(na.a[1], l).abs(),
+            mul(na.h.x, dot(na.a[0], l).abs()),
+        ),
     );
     let rb = mad(
         hb.z,
         dot(bb.b[2], l).abs(),
-        mad(hb.y, dot(bb.b[1], l).abs(), mul(hb.x, dot(bb.b[0], l).abs())),
+        mad(
+            hb.y,
+            dot(bb.b[1], l).abs(),
+            mul(hb.x, dot(bb.b[0], l).abs()),
+        ),
     );
     let ll = l1(l);
     let err = mul(
@@ -260,10 +268,7 @@ pub(crate) fn obb_overlap(p: &PoseF, na: &NodeF, nb: &NodeF) -> bool {
         ),
         mul(mul(10.0, U), hbs),
     );
-    let f = mul(
-        mul(64.0, TAU),
-        add(add(add(1.0, ha), hbs), l1(tt)),
-    );
+    let f = mul(mul(64.0, TAU), add(add(add(1.0, ha), hbs), l1(tt)));
     let hb = nb.h;
     let mut axes = vec![na.a[0], na.a[1], na.a[2], bb.b[0], bb.b[1], bb.b[2]];
     for i in 0..3 {
@@ -349,10 +354,7 @@ pub(crate) fn tri_tri(p: &PoseF, a: [V3; 3], b: [V3; 3]) -> u32 {
     let pb_mag = maxabs(pb).max(maxabs(qb).max(maxabs(rb)));
     let delta = mul(
         add(
-            mul(mul(0.5, U), pa_mag).max(mul(
-                U,
-                add(mul(16.0, pb_mag), mul(5.0, maxabs(p.t))),
-            )),
+            mul(mul(0.5, U), pa_mag).max(mul(U, add(mul(16.0, pb_mag), mul(5.0, maxabs(p.t))))),
             mul(8.0, TAU),
         ),
         1.01,
@@ -599,7 +601,10 @@ mod tests {
                 cube.clone(),
                 Pose::from_translation(far),
                 cube.clone(),
-                Pose::new(far + DVec3::new(1.0, 0.3, 0.1), DQuat::from_rotation_x(1e-7)),
+                Pose::new(
+                    far + DVec3::new(1.0, 0.3, 0.1),
+                    DQuat::from_rotation_x(1e-7),
+                ),
             ),
             (
                 cube.clone(),

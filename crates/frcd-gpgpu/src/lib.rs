@@ -48,9 +48,9 @@
 
 mod boxes;
 mod context;
-mod error;
 #[cfg(test)]
 mod emulate;
+mod error;
 mod mesh;
 #[doc(hidden)]
 pub mod pack;

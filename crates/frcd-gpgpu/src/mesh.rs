@@ -217,7 +217,13 @@ impl Arena {
         opts: &ArenaOptions,
     ) -> Result<Self, GpuError> {
         let nodes = ArenaTex::new(device, "frcd-gpgpu node arena", NODE_TEXELS, opts, limits)?;
-        let tris = ArenaTex::new(device, "frcd-gpgpu triangle arena", TRI_TEXELS, opts, limits)?;
+        let tris = ArenaTex::new(
+            device,
+            "frcd-gpgpu triangle arena",
+            TRI_TEXELS,
+            opts,
+            limits,
+        )?;
         let layout = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frcd-gpgpu arena layout"),
             size: 32,
@@ -343,8 +349,10 @@ impl GpuContext {
         let (tri_row, g2) = arena.tris.alloc(self, tri_rows)?;
         let node_base = node_row * arena.nodes.layout.items_per_row as u64;
         let tri_base = tri_row * arena.tris.layout.items_per_row as u64;
-        for (what, base) in [("node arena slots", node_base), ("triangle arena slots", tri_base)]
-        {
+        for (what, base) in [
+            ("node arena slots", node_base),
+            ("triangle arena slots", tri_base),
+        ] {
             if base + (1 << 24) > u32::MAX as u64 {
                 return Err(GpuError::MeshTooLarge {
                     what,

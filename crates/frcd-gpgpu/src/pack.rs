@@ -221,7 +221,11 @@ pub fn obb_to_f32(obb: &Obb, node: usize) -> Result<ObbF32, GpuError> {
             "OBB node {node} is not finite or has a negative extent"
         )));
     }
-    let mag = obb.center.abs().max_element().max(obb.half_extents.max_element());
+    let mag = obb
+        .center
+        .abs()
+        .max_element()
+        .max(obb.half_extents.max_element());
     if mag > MAX_MAGNITUDE {
         return Err(GpuError::MagnitudeOutOfRange {
             what: format!("OBB node {node}"),
@@ -405,7 +409,11 @@ fn pack_into(
                 "triangle {index} has a non-finite coordinate"
             )));
         }
-        let mag = tri.v.iter().map(|p| p.abs().max_element()).fold(0.0, f64::max);
+        let mag = tri
+            .v
+            .iter()
+            .map(|p| p.abs().max_element())
+            .fold(0.0, f64::max);
         if mag > MAX_MAGNITUDE {
             return Err(GpuError::MagnitudeOutOfRange {
                 what: format!("triangle {index}"),
@@ -446,8 +454,10 @@ mod tests {
                 if let Ok(l) = TexLayout::new(n, 5, w, r, 64) {
                     assert!(l.layers >= 2, "{n} {w} {r}");
                     assert!(!(l.width() == l.rows_per_layer && l.layers % 6 == 0));
-                    assert!(l.items_per_row as usize * l.rows_per_layer as usize
-                        * l.layers as usize >= n);
+                    assert!(
+                        l.items_per_row as usize * l.rows_per_layer as usize * l.layers as usize
+                            >= n
+                    );
                 }
             }
         }

@@ -158,7 +158,11 @@ impl QueryScratch {
         let fsize = self.frontier_cap as u64 * ENTRY_BYTES;
         let osize = self.output_cap as u64 * ENTRY_BYTES;
         let psize = self.pair_cap as u64 * PAIR_BYTES;
-        ctx.check_storage(&[("frontier", fsize), ("output", osize), ("pair table", psize)])?;
+        ctx.check_storage(&[
+            ("frontier", fsize),
+            ("output", osize),
+            ("pair table", psize),
+        ])?;
         use wgpu::BufferUsages as B;
         let d = &ctx.device;
         let buf = |label: &str, size: u64, usage: B| ctx.buffer(label, size, usage);
@@ -235,7 +239,14 @@ struct Prepared {
 /// the shaders' error bounds include this rounding), then the meshes' arena bases.
 fn pair_info(frame: &RelativeFrame, a: &GpuMesh, b: &GpuMesh) -> PairInfo {
     let m = frame.m;
-    let row = |k: usize| [m.x_axis[k] as f32, m.y_axis[k] as f32, m.z_axis[k] as f32, 0.0];
+    let row = |k: usize| {
+        [
+            m.x_axis[k] as f32,
+            m.y_axis[k] as f32,
+            m.z_axis[k] as f32,
+            0.0,
+        ]
+    };
     PairInfo {
         r0: row(0),
         r1: row(1),
@@ -411,7 +422,8 @@ impl GpuContext {
         );
         if n == 0 {
             // Still a valid chain: `init` sets an empty frontier.
-            self.queue.write_buffer(&bufs.pairs, 0, &[0u8; PAIR_BYTES as usize]);
+            self.queue
+                .write_buffer(&bufs.pairs, 0, &[0u8; PAIR_BYTES as usize]);
         } else {
             self.queue
                 .write_buffer(&bufs.pairs, 0, bytemuck::cast_slice(&p.infos));

@@ -319,7 +319,10 @@ fn meshes_split_across_rows_and_layers() {
     let ctx = match GpuContext::headless_with(&opts) {
         Ok(c) => c,
         Err(e) => {
-            assert!(!require_gpu(), "FRCD_REQUIRE_GPU=1 but no usable adapter: {e}");
+            assert!(
+                !require_gpu(),
+                "FRCD_REQUIRE_GPU=1 but no usable adapter: {e}"
+            );
             println!("SKIP: {e}");
             return;
         }
@@ -342,7 +345,10 @@ fn meshes_split_across_rows_and_layers() {
     // Larger meshes force growth; the first mesh stays valid across it.
     let second = body(&ctx, shapes::icosphere(1.0, 3));
     let third = body(&ctx, shapes::torus(0.8, 0.25, 48, 16).expect("torus"));
-    assert_eq!(agree(&ctx, &first, &first, &poses, &mut scratch, true).0, before);
+    assert_eq!(
+        agree(&ctx, &first, &first, &poses, &mut scratch, true).0,
+        before
+    );
     assert!(agree(&ctx, &second, &third, &poses, &mut scratch, true).0 > 0);
     assert!(agree(&ctx, &first, &second, &poses, &mut scratch, true).0 > 0);
 }
@@ -391,7 +397,10 @@ fn a_frame_of_many_pairs_is_one_submission() {
     let (s0, r0) = (ctx.submissions(), ctx.readbacks());
     let again = ctx.collide_batch(&batch, &mut scratch).unwrap();
     assert_eq!((ctx.submissions() - s0, ctx.readbacks() - r0), (1, 1));
-    assert_eq!((again.submissions, again.readbacks, again.reruns), (1, 1, 0));
+    assert_eq!(
+        (again.submissions, again.readbacks, again.reruns),
+        (1, 1, 0)
+    );
     let mut touching = 0;
     for (k, &(a, pa, b, pb)) in items.iter().enumerate() {
         let want = oracle::pairs(&bodies[a].mesh, &poses[pa], &bodies[b].mesh, &poses[pb]);
@@ -400,7 +409,12 @@ fn a_frame_of_many_pairs_is_one_submission() {
         touching += usize::from(!want.is_empty());
     }
     assert!(touching > 5 && touching < items.len(), "{touching}");
-    assert!(ctx.collide_batch(&[], &mut scratch).unwrap().results.is_empty());
+    assert!(
+        ctx.collide_batch(&[], &mut scratch)
+            .unwrap()
+            .results
+            .is_empty()
+    );
 }
 
 /// Issue 10 item 3: recorded into the caller's encoder, submitted by the caller, resolved by
@@ -637,10 +651,7 @@ fn meshes_that_do_not_fit_are_a_typed_error() {
         sub += 1;
     }
     let t = tree(&shapes::icosphere(1.0, sub));
-    assert!(matches!(
-        ctx.upload(&t),
-        Err(GpuError::MeshTooLarge { .. })
-    ));
+    assert!(matches!(ctx.upload(&t), Err(GpuError::MeshTooLarge { .. })));
     // The context still works for meshes that fit.
     ctx.upload(&tree(&shapes::icosphere(1.0, 0))).unwrap();
 }

@@ -123,13 +123,47 @@ pub fn mirrors() -> Vec<(&'static str, usize, Vec<(&'static str, usize, usize)>)
         };
     }
     vec![
-        m!(State { cur: u32, next: u32, out: u32, needed: u32, levels: u32, pairs_tested: u32, pad0: u32, pad1: u32 }),
+        m!(State {
+            cur: u32,
+            next: u32,
+            out: u32,
+            needed: u32,
+            levels: u32,
+            pairs_tested: u32,
+            pad0: u32,
+            pad1: u32
+        }),
         m!(Params { caps: [u32; 4] }),
-        m!(Arena { node_layout: [u32; 4], tri_layout: [u32; 4] }),
-        m!(PairInfo { r0: [f32; 4], r1: [f32; 4], r2: [f32; 4], t: [f32; 4], base: [u32; 4] }),
-        m!(BodyBox { lo_dn: [f32; 4], hi_up: [f32; 4], lo_up: [f32; 4], hi_dn: [f32; 4] }),
+        m!(Arena {
+            node_layout: [u32; 4],
+            tri_layout: [u32; 4]
+        }),
+        m!(PairInfo {
+            r0: [f32; 4],
+            r1: [f32; 4],
+            r2: [f32; 4],
+            t: [f32; 4],
+            base: [u32; 4]
+        }),
+        m!(BodyBox {
+            lo_dn: [f32; 4],
+            hi_up: [f32; 4],
+            lo_up: [f32; 4],
+            hi_dn: [f32; 4]
+        }),
         m!(BoxParams { n: [u32; 4] }),
-        m!(Draw { clip_from_local: [[f32; 4]; 4] }),
-        m!(ResolveParams { width: u32, height: u32, entering_code: u32, _pad0: u32, depth_ref: f32, depth_scale: f32, _pad1: f32, _pad2: f32 }),
+        m!(Draw {
+            clip_from_local: [[f32; 4]; 4]
+        }),
+        m!(ResolveParams {
+            width: u32,
+            height: u32,
+            entering_code: u32,
+            _pad0: u32,
+            depth_ref: f32,
+            depth_scale: f32,
+            _pad1: f32,
+            _pad2: f32
+        }),
     ]
 }

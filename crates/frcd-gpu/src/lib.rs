@@ -135,7 +135,9 @@ pub fn read_back(
         match rx.try_recv() {
             Ok(r) => break r,
             Err(std::sync::mpsc::TryRecvError::Empty) => {
-                device.poll(wgpu::PollType::Poll).map_err(SetupError::Poll)?;
+                device
+                    .poll(wgpu::PollType::Poll)
+                    .map_err(SetupError::Poll)?;
                 std::thread::yield_now();
             }
             Err(std::sync::mpsc::TryRecvError::Disconnected) => {

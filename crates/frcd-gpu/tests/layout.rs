@@ -21,12 +21,18 @@ fn mirrors_match_naga_reflection() {
     let mut structs = std::collections::BTreeMap::new();
     for (_, ty) in module.types.iter() {
         if let naga::TypeInner::Struct { members, span } = &ty.inner {
-            structs.insert(ty.name.clone().unwrap_or_default(), (members.clone(), *span));
+            structs.insert(
+                ty.name.clone().unwrap_or_default(),
+                (members.clone(), *span),
+            );
         }
     }
     let mirrors = frcd_gpu::layout::mirrors();
     assert_eq!(
-        mirrors.iter().map(|m| m.0.to_string()).collect::<std::collections::BTreeSet<_>>(),
+        mirrors
+            .iter()
+            .map(|m| m.0.to_string())
+            .collect::<std::collections::BTreeSet<_>>(),
         structs.keys().cloned().collect(),
         "every prelude struct has exactly one mirror"
     );

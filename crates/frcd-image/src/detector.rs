@@ -642,13 +642,7 @@ impl ImageDetector {
     /// The scratch's targets are square, `side` pixels (the query's resolution) or more, and
     /// are kept for every later image that fits: a query renders into the `w × h` corner
     /// (viewport and scissor), so a changing overlap aspect ratio reallocates nothing.
-    fn scratch<'s>(
-        &self,
-        scratch: &'s mut ImageScratch,
-        w: u32,
-        h: u32,
-        side: u32,
-    ) -> &'s Scratch {
+    fn scratch<'s>(&self, scratch: &'s mut ImageScratch, w: u32, h: u32, side: u32) -> &'s Scratch {
         let fits = matches!(&scratch.inner, Some(s) if s.detector == self.id && s.width >= w && s.height >= h);
         if !fits {
             let side = side.max(w).max(h);

@@ -44,7 +44,9 @@ pub enum ImageError {
     /// backend translates WGSL to GLSL, which cannot `textureLoad` a depth texture or read the
     /// stencil aspect as an integer texture (the depth peeling and the parity resolve need
     /// both): refused here, at context creation, rather than failing or answering wrongly later.
-    #[error("adapter '{adapter}' uses the {backend:?} backend, which the image detector cannot use: {reason}")]
+    #[error(
+        "adapter '{adapter}' uses the {backend:?} backend, which the image detector cannot use: {reason}"
+    )]
     UnsupportedBackend {
         /// Adapter name.
         adapter: String,

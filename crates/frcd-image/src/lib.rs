@@ -108,12 +108,12 @@ pub mod reference;
 mod view;
 
 pub use context::GpuContext;
-#[doc(hidden)]
-pub use detector::{RASTER_WGSL, RESOLVE_WGSL};
 pub use detector::{
     CollidingSet, ErrorBounds, GpuMesh, ImageDetector, ImageOptions, ImageResult, ImageScratch,
     PixelImage, check_solid,
 };
+#[doc(hidden)]
+pub use detector::{RASTER_WGSL, RESOLVE_WGSL};
 pub use error::{ImageError, Which};
 pub use view::{View, ViewAxis};
 /// The wgpu this crate is built on (to create a device for [`GpuContext::from_device`]).

@@ -626,7 +626,11 @@ fn gl_is_refused_at_context_creation() {
                         &opts(64),
                     )
                     .unwrap();
-                assert!(r.collide && r.volume > 0.3 && r.volume < 0.7, "{}", r.volume);
+                assert!(
+                    r.collide && r.volume > 0.3 && r.volume < 0.7,
+                    "{}",
+                    r.volume
+                );
             }
         }
     }
@@ -636,25 +640,40 @@ fn gl_is_refused_at_context_creation() {
 /// (it changes with every pose), and the answers stay right in the reused targets.
 #[test]
 fn targets_are_allocated_once_per_resolution() {
-    with_gpu("targets_are_allocated_once_per_resolution", |det, scratch| {
-        let a = det.upload("a", &shapes::cuboid(DVec3::new(1.0, 0.5, 0.25))).unwrap();
-        let b = det.upload("b", &shapes::cuboid(DVec3::splat(0.5))).unwrap();
-        let mut volumes = Vec::new();
-        for (k, dx) in [0.2, 0.9, 1.3, 0.5, 1.1].into_iter().enumerate() {
-            let pb = Pose::new(DVec3::new(dx, 0.3 * k as f64 / 4.0, 0.1), DQuat::IDENTITY);
-            let r = det.query(scratch, &a, &Pose::IDENTITY, &b, &pb, &opts(128)).unwrap();
-            let view = r.view.expect("boxes overlap");
-            assert!(view.width <= 128 && view.height <= 128);
-            // Exact overlap volume of two axis-aligned boxes.
-            let ov = |lo1: f64, hi1: f64, lo2: f64, hi2: f64| (hi1.min(hi2) - lo1.max(lo2)).max(0.0);
-            let want = ov(-1.0, 1.0, dx - 0.5, dx + 0.5)
-                * ov(-0.5, 0.5, pb.translation.y - 0.5, pb.translation.y + 0.5)
-                * ov(-0.25, 0.25, -0.4, 0.6);
-            assert!((r.volume - want).abs() <= 0.03 * want + 1e-3, "{k}: {} vs {want}", r.volume);
-            volumes.push((view.width, view.height));
-        }
-        assert!(volumes.windows(2).any(|w| w[0] != w[1]), "aspect ratios must vary: {volumes:?}");
-        assert_eq!(scratch.allocations(), 1);
-        assert_eq!(scratch.capacity(), Some((128, 128)));
-    });
+    with_gpu(
+        "targets_are_allocated_once_per_resolution",
+        |det, scratch| {
+            let a = det
+                .upload("a", &shapes::cuboid(DVec3::new(1.0, 0.5, 0.25)))
+                .unwrap();
+            let b = det.upload("b", &shapes::cuboid(DVec3::splat(0.5))).unwrap();
+            let mut volumes = Vec::new();
+            for (k, dx) in [0.2, 0.9, 1.3, 0.5, 1.1].into_iter().enumerate() {
+                let pb = Pose::new(DVec3::new(dx, 0.3 * k as f64 / 4.0, 0.1), DQuat::IDENTITY);
+                let r = det
+                    .query(scratch, &a, &Pose::IDENTITY, &b, &pb, &opts(128))
+                    .unwrap();
+                let view = r.view.expect("boxes overlap");
+                assert!(view.width <= 128 && view.height <= 128);
+                // Exact overlap volume of two axis-aligned boxes.
+                let ov =
+                    |lo1: f64, hi1: f64, lo2: f64, hi2: f64| (hi1.min(hi2) - lo1.max(lo2)).max(0.0);
+                let want = ov(-1.0, 1.0, dx - 0.5, dx + 0.5)
+                    * ov(-0.5, 0.5, pb.translation.y - 0.5, pb.translation.y + 0.5)
+                    * ov(-0.25, 0.25, -0.4, 0.6);
+                assert!(
+                    (r.volume - want).abs() <= 0.03 * want + 1e-3,
+                    "{k}: {} vs {want}",
+                    r.volume
+                );
+                volumes.push((view.width, view.height));
+            }
+            assert!(
+                volumes.windows(2).any(|w| w[0] != w[1]),
+                "aspect ratios must vary: {volumes:?}"
+            );
+            assert_eq!(scratch.allocations(), 1);
+            assert_eq!(scratch.capacity(), Some((128, 128)));
+        },
+    );
 }
