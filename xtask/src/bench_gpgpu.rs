@@ -12,15 +12,21 @@
 //!
 //! Every GPU answer is checked against the CPU's (a difference aborts the run).
 //!
+//! Many-body frames (`--frame-parts 2,8,64`): parts of 20k-55k triangles (64 parts: about 2M
+//! triangles) jittering on a grid; each frame a CPU sort-and-sweep broad phase, then every
+//! candidate body pair: on the CPU (`frcd_obb::collide` one pair after another, or on rayon's
+//! pool) or on the GPU (`GpuContext::collide_batch`: one dispatch chain, one submission, one
+//! readback per frame). Answers checked equal on every frame.
+//!
 //! Many bodies: `GpuContext::overlapping_bodies` against the CPU's all-pairs box test, by body
-//! count.
+//! count (1 to 4,096).
 //!
 //! The crossover (the smallest size where the GPU is faster) is printed for each comparison.
 //! Options: `--levels 1,2,3,4,5`, `--pairs K`, `--bodies 100,400,...`, `--runs N`, `--out DIR`.
 
 use anyhow::{Context, Result, bail};
 use frcd_geom::{Aabb, DQuat, DVec3, Pose, shapes};
-use frcd_gpgpu::{BoxScratch, GpuContext, QueryScratch};
+use frcd_gpgpu::{BoxScratch, GpuContext, GpuMesh, QueryScratch};
 use frcd_obb::{BuildOptions, Mode, ObbTree, Request, collide};
 use rayon::prelude::*;
 use std::fmt::Write as _;
@@ -31,6 +37,7 @@ struct Opts {
     levels: Vec<u32>,
     pairs: usize,
     bodies: Vec<usize>,
+    frames: Vec<usize>,
     runs: usize,
     out: PathBuf,
 }
@@ -39,7 +46,8 @@ fn parse(args: &[String]) -> Result<Opts> {
     let mut o = Opts {
         levels: vec![1, 2, 3, 4, 5],
         pairs: 8,
-        bodies: vec![50, 200, 800, 3200],
+        bodies: vec![1, 16, 256, 1024, 4096],
+        frames: vec![2, 8, 64],
         runs: 5,
         out: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bench"),
     };
@@ -54,11 +62,14 @@ fn parse(args: &[String]) -> Result<Opts> {
         match a.as_str() {
             "--levels" => o.levels = list(it.next())?.into_iter().map(|x| x as u32).collect(),
             "--bodies" => o.bodies = list(it.next())?.into_iter().map(|x| x as usize).collect(),
+            "--frame-parts" => {
+                o.frames = list(it.next())?.into_iter().map(|x| x as usize).collect()
+            }
             "--pairs" => o.pairs = it.next().context("--pairs N")?.parse()?,
             "--runs" => o.runs = it.next().context("--runs N")?.parse()?,
             "--out" => o.out = PathBuf::from(it.next().context("--out DIR")?),
             other => bail!(
-                "bench gpgpu: unknown option '{other}' (--levels L,.. --pairs K --bodies N,.. --runs N --out DIR)"
+                "bench gpgpu: unknown option '{other}' (--levels L,.. --pairs K --bodies N,.. --frame-parts N,.. --runs N --out DIR)"
             ),
         }
     }
@@ -91,6 +102,76 @@ struct PairRow {
     cpu_all: f64,
     gpu: f64,
     upload: f64,
+}
+
+struct FrameRow {
+    parts: usize,
+    triangles: usize,
+    candidates: usize,
+    touching_bodies: usize,
+    touching: usize,
+    cpu1: f64,
+    cpu_all: f64,
+    gpu: f64,
+    submissions: u32,
+}
+
+/// The parts of a many-body frame: CAD-sized closed meshes of 20k-55k triangles (about 31k on
+/// average), of size ~2.
+fn frame_part(i: usize) -> frcd_geom::TriMesh {
+    match i % 4 {
+        0 => shapes::icosphere(1.0, 5),
+        1 => shapes::torus(0.8, 0.3, 200, 70).expect("torus"),
+        2 => shapes::torus(0.85, 0.25, 300, 90).expect("torus"),
+        _ => shapes::torus(0.75, 0.35, 250, 80).expect("torus"),
+    }
+}
+
+/// Poses of frame `f`: parts (radius about 1.1) on a square grid of spacing 2.25, jittered by
+/// up to 0.12 and turned by up to 0.5 rad, so many neighbours' boxes overlap (candidates) and
+/// some of them touch.
+fn frame_poses(n: usize, f: usize) -> Vec<Pose> {
+    let side = (n as f64).sqrt().ceil() as usize;
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64 ^ (f as u64 * 0x1000_0001);
+    let mut rnd = || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    (0..n)
+        .map(|i| {
+            let c = DVec3::new(2.25 * (i % side) as f64, 2.25 * (i / side) as f64, 0.0);
+            let j = DVec3::new(rnd(), rnd(), rnd()) * 0.12;
+            let axis = DVec3::new(rnd(), rnd(), rnd()).normalize_or(DVec3::Z);
+            Pose::new(c + j, DQuat::from_axis_angle(axis, 0.5 * rnd()))
+        })
+        .collect()
+}
+
+/// The CPU broad phase both backends share: world boxes of the trees' local boxes, pairs by
+/// a sort on x and a sweep (f64, exact for the boxes).
+fn broad_phase(trees: &[&ObbTree], poses: &[Pose]) -> Vec<(usize, usize)> {
+    let boxes: Vec<Aabb> = trees
+        .iter()
+        .zip(poses)
+        .map(|(t, p)| t.aabb().transformed(p))
+        .collect();
+    let mut order: Vec<usize> = (0..boxes.len()).collect();
+    order.sort_by(|&a, &b| boxes[a].min.x.total_cmp(&boxes[b].min.x));
+    let mut out = Vec::new();
+    for (k, &i) in order.iter().enumerate() {
+        for &j in &order[k + 1..] {
+            if boxes[j].min.x > boxes[i].max.x {
+                break;
+            }
+            if boxes[i].intersects(&boxes[j]) {
+                out.push((i.min(j), i.max(j)));
+            }
+        }
+    }
+    out.sort_unstable();
+    out
 }
 
 struct BoxRow {
@@ -211,6 +292,90 @@ pub fn run(args: &[String]) -> Result<()> {
             cpu_all,
             gpu,
             upload,
+        });
+    }
+
+    let mut frame_rows = Vec::new();
+    for &n in &o.frames {
+        let meshes: Vec<frcd_geom::TriMesh> = (0..n.min(4)).map(frame_part).collect();
+        let trees_unique: Vec<ObbTree> = meshes
+            .iter()
+            .map(|m| ObbTree::build(m, &BuildOptions::default()))
+            .collect();
+        let gpu_unique: Vec<GpuMesh> = trees_unique
+            .iter()
+            .map(|t| ctx.upload(t))
+            .collect::<Result<_, _>>()?;
+        // Parts share meshes (as instances of a CAD part do); each body still has its pose.
+        let trees: Vec<&ObbTree> = (0..n).map(|i| &trees_unique[i % 4]).collect();
+        let triangles: usize = trees.iter().map(|t| t.triangles().len()).sum();
+        let mut scratch = QueryScratch::default();
+        // Eight fixed frames, cycled through by every timed run (same frames for each side).
+        let frames: Vec<Vec<Pose>> = (0..8).map(|f| frame_poses(n, f)).collect();
+        let (mut candidates, mut touching_bodies, mut touching, mut submissions) = (0, 0, 0, 0);
+        // Correctness first, on every frame: the GPU's pairs equal the CPU's.
+        for poses in &frames {
+            let cand = broad_phase(&trees, poses);
+            let batch: Vec<_> = cand
+                .iter()
+                .map(|&(i, j)| (&gpu_unique[i % 4], &poses[i], &gpu_unique[j % 4], &poses[j]))
+                .collect();
+            let got = ctx.collide_batch(&batch, &mut scratch)?;
+            for (k, &(i, j)) in cand.iter().enumerate() {
+                let cpu = collide(trees[i], &poses[i], trees[j], &poses[j], &request);
+                if cpu.pairs != got.results[k].pairs {
+                    bail!("frame of {n} parts: pair ({i}, {j}) differs between GPU and CPU");
+                }
+                touching += cpu.pairs.len();
+                touching_bodies += usize::from(!cpu.pairs.is_empty());
+            }
+            candidates += cand.len();
+            // Steady state: the first frame may grow the buffers (overflow re-runs).
+            submissions = got.submissions;
+        }
+        let nf = frames.len();
+        let mut f = 0;
+        let cpu1 = median_ms(o.runs, || {
+            let poses = &frames[f % nf];
+            f += 1;
+            for (i, j) in broad_phase(&trees, poses) {
+                std::hint::black_box(collide(trees[i], &poses[i], trees[j], &poses[j], &request));
+            }
+        });
+        f = 0;
+        let cpu_all = median_ms(o.runs, || {
+            let poses = &frames[f % nf];
+            f += 1;
+            broad_phase(&trees, poses).par_iter().for_each(|&(i, j)| {
+                std::hint::black_box(collide(trees[i], &poses[i], trees[j], &poses[j], &request));
+            });
+        });
+        f = 0;
+        let gpu = median_ms(o.runs, || {
+            let poses = &frames[f % nf];
+            f += 1;
+            let cand = broad_phase(&trees, poses);
+            let batch: Vec<_> = cand
+                .iter()
+                .map(|&(i, j)| (&gpu_unique[i % 4], &poses[i], &gpu_unique[j % 4], &poses[j]))
+                .collect();
+            std::hint::black_box(ctx.collide_batch(&batch, &mut scratch).expect("checked"));
+        });
+        println!(
+            "frame of {n} parts ({triangles} triangles): {:.1} candidates, {:.1} touching body pairs / frame, cpu1 {cpu1:.2} ms, cpu{threads} {cpu_all:.2} ms, gpu {gpu:.2} ms",
+            candidates as f64 / nf as f64,
+            touching_bodies as f64 / nf as f64
+        );
+        frame_rows.push(FrameRow {
+            parts: n,
+            triangles,
+            candidates: candidates / nf,
+            touching_bodies: touching_bodies / nf,
+            touching: touching / nf,
+            cpu1,
+            cpu_all,
+            gpu,
+            submissions,
         });
     }
 
@@ -342,6 +507,52 @@ pub fn run(args: &[String]) -> Result<()> {
          exact CPU re-decision of the uncertain pairs). Upload: one-time packing, texture upload \
          and first submission per mesh.\n"
     )?;
+    if !frame_rows.is_empty() {
+        writeln!(
+            md,
+            "## Many-body frames (parts of 20k-55k triangles jittering on a grid; CPU broad phase, then every candidate pair: GPU `collide_batch` = one submission and one readback per frame)\n"
+        )?;
+        writeln!(
+            md,
+            "| parts | triangles | candidate pairs / frame | touching body pairs | touching triangle pairs | CPU 1 thread ms | CPU {threads} threads ms | GPU ms | GPU / CPU 1 | GPU / CPU {threads} | GPU submissions / frame |"
+        )?;
+        writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|")?;
+        for r in &frame_rows {
+            writeln!(
+                md,
+                "| {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} |",
+                r.parts,
+                r.triangles,
+                r.candidates,
+                r.touching_bodies,
+                r.touching,
+                r.cpu1,
+                r.cpu_all,
+                r.gpu,
+                r.gpu / r.cpu1,
+                r.gpu / r.cpu_all,
+                r.submissions
+            )?;
+        }
+        let sizes: Vec<String> = frame_rows
+            .iter()
+            .map(|r| format!("{} triangles ({} parts)", r.triangles, r.parts))
+            .collect();
+        let gpu: Vec<f64> = frame_rows.iter().map(|r| r.gpu).collect();
+        let c1 = crossover(
+            "frames vs CPU 1 thread",
+            &sizes,
+            &frame_rows.iter().map(|r| r.cpu1).collect::<Vec<_>>(),
+            &gpu,
+        );
+        let cn = crossover(
+            &format!("frames vs CPU {threads} threads"),
+            &sizes,
+            &frame_rows.iter().map(|r| r.cpu_all).collect::<Vec<_>>(),
+            &gpu,
+        );
+        writeln!(md, "\n- {c1}\n- {cn}\n")?;
+    }
     if !box_rows.is_empty() {
         writeln!(
             md,

@@ -1,7 +1,7 @@
 //! `frcd render`: an offscreen wgpu picture of one frame, flat shaded, interfering triangles in
 //! red, bodies contained in another in orange; written as PNG.
 
-use anyhow::{Context, Result, anyhow, bail};
+use anyhow::{Context, Result, bail};
 use frcd_geom::{Aabb, DVec3, Pose};
 use frcd_io::Scene;
 use glam::{DMat4, Mat4};
@@ -169,15 +169,16 @@ fn draw(
     height: u32,
 ) -> Result<Vec<u8>> {
     use wgpu::util::DeviceExt;
-    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
-    let adapter =
-        pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
-            .map_err(|e| anyhow!("no GPU adapter for rendering: {e}"))?;
-    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-        label: Some("frcd render"),
-        ..Default::default()
-    }))
-    .map_err(|e| anyhow!("cannot create a GPU device for rendering: {e}"))?;
+    // Device setup and readback are frcd-gpu's (shared with the GPU backends).
+    let adapter = frcd_gpu::request_adapter(&frcd_gpu::AdapterOptions::default())
+        .context("no GPU adapter for rendering")?;
+    let (device, queue) = frcd_gpu::request_device(
+        &adapter,
+        "frcd render",
+        wgpu::Features::empty(),
+        wgpu::Limits::downlevel_defaults().using_resolution(adapter.limits()),
+    )
+    .context("cannot create a GPU device for rendering")?;
     let max = device.limits().max_texture_dimension_2d;
     if width > max || height > max {
         bail!("image size {width}x{height} exceeds the device's texture limit {max}");
@@ -362,30 +363,16 @@ fn draw(
         },
         size,
     );
-    queue.submit([enc.finish()]);
+    let index = queue.submit([enc.finish()]);
     if let Some(e) = pollster::block_on(scope.pop()) {
-        bail!("GPU rendering failed: {e}");
+        bail!("GPU rendering failed: {}", frcd_gpu::describe(&e));
     }
-    let slice = readback.slice(..);
-    let (tx, rx) = std::sync::mpsc::channel();
-    slice.map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| anyhow!("GPU poll failed: {e}"))?;
-    rx.recv()
-        .map_err(|e| anyhow!("GPU readback failed: {e}"))?
-        .map_err(|e| anyhow!("GPU readback failed: {e}"))?;
-    let mapped = slice
-        .get_mapped_range()
-        .map_err(|e| anyhow!("GPU readback failed: {e}"))?;
+    let mapped = frcd_gpu::read_back(&device, &readback, readback.size(), index)
+        .context("GPU readback failed")?;
     let mut pixels = Vec::with_capacity((width * height * 4) as usize);
     for y in 0..height as usize {
         let start = y * row as usize;
         pixels.extend_from_slice(&mapped[start..start + width as usize * 4]);
     }
-    drop(mapped);
-    readback.unmap();
     Ok(pixels)
 }

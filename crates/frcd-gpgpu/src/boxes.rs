@@ -2,6 +2,7 @@ use crate::context::BOX_TILE;
 use crate::pack::{round_down, round_up};
 use crate::{GpuContext, GpuError};
 use frcd_geom::Aabb;
+use frcd_gpu::layout::{BodyBox, BoxParams};
 
 const UNCERTAIN_FLAG: u32 = 0x8000_0000;
 const MAX_RERUNS: u32 = 32;
@@ -124,28 +125,16 @@ impl BoxScratch {
     }
 }
 
-/// Four f32 corners per box: outer (rounded outward) and inner (rounded inward), as in
-/// boxes.wgsl.
-fn box_words(b: &Aabb) -> [f32; 16] {
+/// The prelude's `BodyBox`: outer corners (rounded outward) and inner ones (rounded inward), as
+/// boxes.wgsl compares them.
+fn body_box(b: &Aabb) -> BodyBox {
     let (lo, hi) = (b.min, b.max);
-    [
-        round_down(lo.x),
-        round_down(lo.y),
-        round_down(lo.z),
-        0.0,
-        round_up(hi.x),
-        round_up(hi.y),
-        round_up(hi.z),
-        0.0,
-        round_up(lo.x),
-        round_up(lo.y),
-        round_up(lo.z),
-        0.0,
-        round_down(hi.x),
-        round_down(hi.y),
-        round_down(hi.z),
-        0.0,
-    ]
+    BodyBox {
+        lo_dn: [round_down(lo.x), round_down(lo.y), round_down(lo.z), 0.0],
+        hi_up: [round_up(hi.x), round_up(hi.y), round_up(hi.z), 0.0],
+        lo_up: [round_up(lo.x), round_up(lo.y), round_up(lo.z), 0.0],
+        hi_dn: [round_down(hi.x), round_down(hi.y), round_down(hi.z), 0.0],
+    }
 }
 
 impl GpuContext {
@@ -178,7 +167,7 @@ impl GpuContext {
                 limit: max_groups * BOX_TILE as u64,
             });
         }
-        let words: Vec<f32> = boxes.iter().flat_map(box_words).collect();
+        let words: Vec<BodyBox> = boxes.iter().map(body_box).collect();
         let (count, entries) = loop {
             let bufs = scratch.ensure(self, n as u32)?;
             self.queue
@@ -186,7 +175,9 @@ impl GpuContext {
             self.queue.write_buffer(
                 &bufs.params,
                 0,
-                bytemuck::cast_slice(&[n as u32, bufs.output_cap, 0, 0]),
+                bytemuck::bytes_of(&BoxParams {
+                    n: [n as u32, bufs.output_cap, 0, 0],
+                }),
             );
             let mut enc = self
                 .device
@@ -206,9 +197,9 @@ impl GpuContext {
             let out_bytes = bufs.output_cap as u64 * 8;
             enc.copy_buffer_to_buffer(&bufs.count, 0, &bufs.staging, 0, 4);
             enc.copy_buffer_to_buffer(&bufs.out, 0, &bufs.staging, 8, out_bytes);
-            self.submit(enc.finish());
+            let index = self.submit(enc.finish());
             answer.submissions += 1;
-            let bytes = self.read_back(&bufs.staging, 8 + out_bytes)?;
+            let bytes = self.read_back(&bufs.staging, 8 + out_bytes, index)?;
             answer.readbacks += 1;
             let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
             let count = words[0];

@@ -18,12 +18,12 @@ pub(crate) const BOX_TILE: u32 = 64;
 /// [`GpuContext::from_adapter`]): the downlevel flags `COMPUTE_SHADERS` and `INDIRECT_EXECUTION`.
 pub fn requirements() -> wgpu::Limits {
     wgpu::Limits {
-        // traverse.wgsl: frontier in/out, state, output; control.wgsl: state, args, frontier.
-        max_storage_buffers_per_shader_stage: 4,
-        // Two trees × (nodes, triangles).
-        max_sampled_textures_per_shader_stage: 4,
-        // Two mesh descriptions, the pose, the capacities.
-        max_uniform_buffers_per_shader_stage: 4,
+        // traverse.wgsl: frontier in/out, state, output, pair table.
+        max_storage_buffers_per_shader_stage: 5,
+        // The arena: nodes, triangles.
+        max_sampled_textures_per_shader_stage: 2,
+        // The arena layout, the capacities.
+        max_uniform_buffers_per_shader_stage: 2,
         max_bind_groups: 2,
         max_storage_buffer_binding_size: 1 << 16,
         max_compute_invocations_per_workgroup: WG,
@@ -35,7 +35,8 @@ pub fn requirements() -> wgpu::Limits {
         max_compute_workgroups_per_dimension: 1,
         // One node (5 texels) per row at least.
         max_texture_dimension_2d: 8,
-        max_texture_array_layers: 1,
+        // Two layers at least (wgpu's GL backend, see `pack::MIN_LAYERS`).
+        max_texture_array_layers: 2,
         ..wgpu::Limits::downlevel_webgl2_defaults()
     }
 }
@@ -47,11 +48,16 @@ pub struct HeadlessOptions {
     pub low_power: bool,
     /// Ask for the fallback (software) adapter only.
     pub force_fallback_adapter: bool,
+    /// Restrict the instance to these wgpu backends (e.g. `wgpu::Backends::GL`); `None`: every
+    /// backend compiled in, narrowed by `WGPU_BACKEND`.
+    pub backends: Option<wgpu::Backends>,
+    /// Shape of the mesh arena.
+    pub arena: crate::ArenaOptions,
 }
 
 /// The compute pipelines and layouts, made once per context.
 pub(crate) struct Pipelines {
-    pub mesh_bgl: wgpu::BindGroupLayout,
+    pub arena_bgl: wgpu::BindGroupLayout,
     pub trav_bgl: wgpu::BindGroupLayout,
     pub ctrl_bgl: wgpu::BindGroupLayout,
     pub boxes_bgl: wgpu::BindGroupLayout,
@@ -70,6 +76,7 @@ pub struct GpuContext {
     pub(crate) limits: wgpu::Limits,
     pub(crate) info: wgpu::AdapterInfo,
     pub(crate) pipes: Pipelines,
+    pub(crate) arena: std::sync::Mutex<crate::mesh::Arena>,
     pub(crate) id: u64,
     submissions: AtomicU64,
     readbacks: AtomicU64,
@@ -134,25 +141,29 @@ impl GpuContext {
 
     /// [`GpuContext::headless`] with options.
     pub fn headless_with(options: &HeadlessOptions) -> Result<Self, GpuError> {
-        let instance =
-            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let adapter = if options.low_power || options.force_fallback_adapter {
-            pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-                power_preference: if options.low_power {
-                    wgpu::PowerPreference::LowPower
-                } else {
-                    wgpu::PowerPreference::HighPerformance
-                },
-                force_fallback_adapter: options.force_fallback_adapter,
-                compatible_surface: None,
-                ..Default::default()
-            }))
-        } else {
-            pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
-                &instance, None,
-            ))
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        if let Some(b) = options.backends {
+            desc.backends = b;
         }
-        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let instance = wgpu::Instance::new(desc);
+        let adapter =
+            if options.low_power || options.force_fallback_adapter || options.backends.is_some() {
+                pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+                    power_preference: if options.low_power {
+                        wgpu::PowerPreference::LowPower
+                    } else {
+                        wgpu::PowerPreference::HighPerformance
+                    },
+                    force_fallback_adapter: options.force_fallback_adapter,
+                    compatible_surface: None,
+                    ..Default::default()
+                }))
+            } else {
+                pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
+                    &instance, None,
+                ))
+            }
+            .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
         let info = adapter.get_info();
         check_downlevel(&adapter.get_downlevel_capabilities(), &info.name)?;
         let limits = adapter.limits();
@@ -173,31 +184,55 @@ impl GpuContext {
             info.backend,
             info.device_type
         );
-        Self::from_device(device, queue)
+        Self::from_device_with(device, queue, &options.arena)
     }
 
     /// A context on the caller's device and queue (an engine's own). The device's limits are
     /// checked against [`requirements`]; the downlevel flags cannot be read from a device, use
-    /// [`GpuContext::from_adapter`] to check them too.
+    /// [`GpuContext::from_adapter`] to check them too. No wgpu backend is forced: the engine
+    /// chooses the backends it compiles in (frcd-gpgpu enables none of wgpu's backend
+    /// features itself).
     pub fn from_device(device: wgpu::Device, queue: wgpu::Queue) -> Result<Self, GpuError> {
+        Self::from_device_with(device, queue, &crate::ArenaOptions::default())
+    }
+
+    /// [`GpuContext::from_device`] with the shape of the mesh arena.
+    pub fn from_device_with(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        arena: &crate::ArenaOptions,
+    ) -> Result<Self, GpuError> {
         let info = device.adapter_info();
         let limits = device.limits();
         check_limits(&limits, &info.name)?;
         // A driver that rejects a shader or pipeline gives a typed error, not a panic.
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let pipes = Pipelines::new(&device);
+        let arena = crate::mesh::Arena::new(&device, &pipes.arena_bgl, &limits, arena);
         if let Some(e) = pollster::block_on(scope.pop()) {
+            // Display of a wgpu error is only its kind; the description names the cause.
+            let reason = frcd_gpu::describe(&e);
             return Err(GpuError::Pipeline {
                 adapter: info.name.clone(),
-                reason: e.to_string(),
+                reason,
             });
         }
+        let arena = arena.map_err(|e| match e {
+            GpuError::Unsupported {
+                what,
+                needed,
+                available,
+                ..
+            } => unsupported(&info.name, what, needed, available),
+            e => e,
+        })?;
         Ok(Self {
             device,
             queue,
             limits,
             info,
             pipes,
+            arena: std::sync::Mutex::new(arena),
             id: NEXT_CONTEXT_ID.fetch_add(1, Ordering::Relaxed),
             submissions: AtomicU64::new(0),
             readbacks: AtomicU64::new(0),
@@ -253,34 +288,23 @@ impl GpuContext {
         self.readbacks.load(Ordering::Relaxed)
     }
 
-    /// Submits one command buffer (counted).
-    pub(crate) fn submit(&self, cmd: wgpu::CommandBuffer) {
+    /// Submits one command buffer (counted); returns its index, the only thing a readback waits
+    /// for.
+    pub(crate) fn submit(&self, cmd: wgpu::CommandBuffer) -> wgpu::SubmissionIndex {
         self.submissions.fetch_add(1, Ordering::Relaxed);
-        self.queue.submit([cmd]);
+        self.queue.submit([cmd])
     }
 
-    /// Maps `staging[..len]` for reading, waits, and returns a copy of the bytes (counted).
-    pub(crate) fn read_back(&self, staging: &wgpu::Buffer, len: u64) -> Result<Vec<u8>, GpuError> {
+    /// Maps `staging[..len]` for reading, waits for submission `index` only (not for other work
+    /// on the device, e.g. an engine's frame), and returns a copy of the bytes (counted).
+    pub(crate) fn read_back(
+        &self,
+        staging: &wgpu::Buffer,
+        len: u64,
+        index: wgpu::SubmissionIndex,
+    ) -> Result<Vec<u8>, GpuError> {
         self.readbacks.fetch_add(1, Ordering::Relaxed);
-        let slice = staging.slice(..len);
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        rx.recv()
-            .map_err(|e| GpuError::Readback(e.to_string()))?
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        let bytes = {
-            let view = slice
-                .get_mapped_range()
-                .map_err(|e| GpuError::Readback(format!("{e:?}")))?;
-            view.to_vec()
-        };
-        staging.unmap();
-        Ok(bytes)
+        frcd_gpu::read_back(&self.device, staging, len, index).map_err(GpuError::Readback)
     }
 
     /// Largest byte size of one storage buffer binding.
@@ -369,17 +393,9 @@ impl Pipelines {
                 entries,
             })
         };
-        let mesh_bgl = bgl(
-            "frcd-gpgpu meshes",
-            &[
-                texture(0),
-                texture(1),
-                texture(2),
-                texture(3),
-                uniform(4),
-                uniform(5),
-                uniform(6),
-            ],
+        let arena_bgl = bgl(
+            "frcd-gpgpu mesh arena",
+            &[texture(0), texture(1), uniform(2)],
         );
         let trav_bgl = bgl(
             "frcd-gpgpu traversal buffers",
@@ -389,16 +405,12 @@ impl Pipelines {
                 storage(2, false),
                 storage(3, false),
                 uniform(4),
+                storage(5, true),
             ],
         );
         let ctrl_bgl = bgl(
             "frcd-gpgpu control",
-            &[
-                storage(0, false),
-                storage(1, false),
-                storage(2, false),
-                uniform(3),
-            ],
+            &[storage(0, false), storage(1, false), uniform(2)],
         );
         let boxes_bgl = bgl(
             "frcd-gpgpu boxes",
@@ -412,7 +424,7 @@ impl Pipelines {
         let module = |label: &str, src: &str| {
             device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(label),
-                source: wgpu::ShaderSource::Wgsl(src.into()),
+                source: wgpu::ShaderSource::Wgsl(frcd_gpu::with_prelude(src).into()),
             })
         };
         let traverse_mod = module("traverse.wgsl", shaders::TRAVERSE);
@@ -427,7 +439,7 @@ impl Pipelines {
                 immediate_size: 0,
             })
         };
-        let trav_layout = layout("frcd-gpgpu traverse", &[&mesh_bgl, &trav_bgl]);
+        let trav_layout = layout("frcd-gpgpu traverse", &[&arena_bgl, &trav_bgl]);
         let ctrl_layout = layout("frcd-gpgpu control", &[&ctrl_bgl]);
         let boxes_layout = layout("frcd-gpgpu boxes", &[&boxes_bgl]);
         let pipeline = |label: &str,
@@ -453,7 +465,7 @@ impl Pipelines {
             init: pipeline("frcd-gpgpu init", &ctrl_layout, &control_mod, "init"),
             prepare: pipeline("frcd-gpgpu prepare", &ctrl_layout, &control_mod, "prepare"),
             boxes: pipeline("frcd-gpgpu boxes", &boxes_layout, &boxes_mod, "overlap"),
-            mesh_bgl,
+            arena_bgl,
             trav_bgl,
             ctrl_bgl,
             boxes_bgl,

@@ -1,5 +1,6 @@
 /// Everything that can go wrong in frcd-gpgpu. Nothing here panics on bad input.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum GpuError {
     /// No adapter (GPU or software driver) could be found.
     #[error("no GPU adapter found: {0}")]
@@ -60,6 +61,19 @@ pub enum GpuError {
         /// max |AᵀA - I|.
         deviation: f64,
     },
+    /// A coordinate, extent or translation too large for the f32 error bounds: above
+    /// [`crate::MAX_MAGNITUDE`] the shaders' products could overflow, and WGSL allows an
+    /// implementation to assume finite math. Re-centre the mesh (upload it relative to a
+    /// local origin near its geometry).
+    #[error("{what} has magnitude {value:e}, above the GPU limit {limit:e}")]
+    MagnitudeOutOfRange {
+        /// What (node, triangle or pose) was too large.
+        what: String,
+        /// Its magnitude.
+        value: f64,
+        /// [`crate::MAX_MAGNITUDE`].
+        limit: f64,
+    },
     /// A pose or box with NaN/inf, or a non-unit rotation.
     #[error("invalid input: {0}")]
     InvalidInput(String),
@@ -67,8 +81,8 @@ pub enum GpuError {
     #[error("{0} belongs to another GpuContext")]
     ForeignObject(&'static str),
     /// Reading results back failed (device lost, mapping error).
-    #[error("GPU readback failed: {0}")]
-    Readback(String),
+    #[error("GPU readback failed")]
+    Readback(#[source] frcd_gpu::SetupError),
     /// The GPU reported a state that the traversal cannot produce (a bug, or a broken driver).
     #[error("GPU traversal inconsistency: {0}")]
     Internal(String),

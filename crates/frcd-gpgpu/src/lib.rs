@@ -27,8 +27,10 @@
 //!   GPU (the hybrid scheduler's rough colliding set), equal to the f64 answer.
 //!
 //! Numbers: the GPU computes in f32 relative to each body's local origin; every f32 quantity that
-//! could drop a candidate carries a computed error bound (see `shaders/gpgpu/traverse.wgsl` and
-//! [`pack`]).
+//! could drop a candidate carries a computed error bound that holds under WGSL's float rules
+//! (rounding either way, fused multiply-adds, flush-to-zero; derivation in
+//! `shaders/traverse.wgsl`), and every pair the GPU reports is re-decided exactly on the CPU.
+//! Magnitudes above [`MAX_MAGNITUDE`] are refused ([`GpuError::MagnitudeOutOfRange`]).
 //!
 //! ```no_run
 //! use frcd_gpgpu::{GpuContext, QueryScratch};
@@ -48,16 +50,21 @@
 
 mod boxes;
 mod context;
+#[cfg(test)]
+mod emulate;
 mod error;
 mod mesh;
+#[doc(hidden)]
 pub mod pack;
 mod query;
+#[doc(hidden)]
 pub mod shaders;
 
 pub use boxes::{BodyPairs, BoxScratch};
 pub use context::{GpuContext, HeadlessOptions, requirements};
 pub use error::GpuError;
-pub use mesh::{GpuMesh, UploadOptions};
-pub use query::{GpuCollision, QueryScratch};
+pub use mesh::{ArenaOptions, GpuMesh};
+pub use pack::{MAX_MAGNITUDE, TexLayout};
+pub use query::{BodyPair, GpuBatch, GpuCollision, PendingBatch, QueryScratch};
 /// The wgpu this crate is built on (to create a device for [`GpuContext::from_device`]).
 pub use wgpu;

@@ -1,33 +1,303 @@
-use crate::pack::{PackedTree, TexLayout, TexLimits, pack_tree};
+use crate::pack::{NODE_TEXELS, PackedTree, TRI_TEXELS, TexLayout, pack_tree_rows};
 use crate::{GpuContext, GpuError};
 use frcd_geom::Triangle;
 use frcd_obb::ObbTree;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
 
-static NEXT_MESH_ID: AtomicU64 = AtomicU64::new(1);
-
-/// Options of [`GpuContext::upload_with`]: caps on the texture size below the device's limits
-/// (to test the row / layer splitting on small meshes). `None`: the device's limit.
+/// Shape of the context's mesh arena (see [`GpuContext::upload`]): every mesh of a context lives
+/// in one node texture and one triangle texture, so a whole batch of body pairs is traversed in
+/// one dispatch chain. `None`: the default (1,024 items per row, 64 rows per layer, clamped to
+/// the device's texture limits). Small values exercise the row and layer splitting in tests.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct UploadOptions {
-    /// Most texels per texture row.
-    pub max_texture_width: Option<u32>,
-    /// Most rows per texture layer.
-    pub max_texture_rows: Option<u32>,
+pub struct ArenaOptions {
+    /// Items (nodes or triangles) per texture row.
+    pub items_per_row: Option<u32>,
+    /// Rows per texture array layer.
+    pub rows_per_layer: Option<u32>,
 }
 
-/// One body's OBB tree and triangles resident on the GPU (uploaded once), plus the f64
-/// triangles the CPU needs to re-decide uncertain pairs.
+/// One arena texture: `rows_per_layer × layers` rows of `items_per_row` items; meshes take
+/// whole rows, allocated in order.
+pub(crate) struct ArenaTex {
+    texture: wgpu::Texture,
+    pub view: wgpu::TextureView,
+    pub layout: TexLayout,
+    next_row: u64,
+    max_layers: u32,
+    label: &'static str,
+}
+
+/// The mesh arena of a context (behind its mutex).
+pub(crate) struct Arena {
+    pub nodes: ArenaTex,
+    pub tris: ArenaTex,
+    pub layout: wgpu::Buffer,
+    pub bind: wgpu::BindGroup,
+    /// Bumped whenever a texture is reallocated (the bind group changes).
+    pub generation: u64,
+}
+
+fn arena_texture(
+    ctx_device: &wgpu::Device,
+    label: &'static str,
+    layout: &TexLayout,
+) -> wgpu::Texture {
+    ctx_device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width: layout.width(),
+            height: layout.rows_per_layer,
+            depth_or_array_layers: layout.layers,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba32Float,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING
+            | wgpu::TextureUsages::COPY_DST
+            | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    })
+}
+
+fn view_of(t: &wgpu::Texture, label: &'static str) -> wgpu::TextureView {
+    t.create_view(&wgpu::TextureViewDescriptor {
+        label: Some(label),
+        dimension: Some(wgpu::TextureViewDimension::D2Array),
+        ..Default::default()
+    })
+}
+
+/// Layers for `rows` rows: at least 2 (wgpu's GL backend makes a one-layer texture a
+/// `TEXTURE_2D`, read as zeros through a `texture_2d_array` binding) and never a multiple of 6
+/// on a square layer (GL makes that a cube map).
+fn layers_for(layout: &TexLayout, layers: u32) -> u32 {
+    let layers = layers.max(crate::pack::MIN_LAYERS);
+    if layout.width() == layout.rows_per_layer && layers % 6 == 0 {
+        layers + 1
+    } else {
+        layers
+    }
+}
+
+impl ArenaTex {
+    fn new(
+        device: &wgpu::Device,
+        label: &'static str,
+        texels_per_item: u32,
+        opts: &ArenaOptions,
+        limits: &wgpu::Limits,
+    ) -> Result<Self, GpuError> {
+        let dim = limits.max_texture_dimension_2d;
+        let per_row = opts
+            .items_per_row
+            .unwrap_or(1024)
+            .min(dim / texels_per_item)
+            .max(1);
+        let rows = opts.rows_per_layer.unwrap_or(64).min(dim).max(1);
+        if dim < texels_per_item || limits.max_texture_array_layers < crate::pack::MIN_LAYERS {
+            return Err(GpuError::Unsupported {
+                adapter: String::new(),
+                what: "texture size (one item per row, two layers)",
+                needed: texels_per_item as u64,
+                available: dim as u64,
+            });
+        }
+        let mut layout = TexLayout {
+            texels_per_item,
+            items_per_row: per_row,
+            rows_per_layer: rows,
+            layers: 0,
+        };
+        layout.layers = layers_for(&layout, 2);
+        let texture = arena_texture(device, label, &layout);
+        Ok(Self {
+            view: view_of(&texture, label),
+            texture,
+            layout,
+            next_row: 0,
+            max_layers: limits.max_texture_array_layers,
+            label,
+        })
+    }
+
+    /// Reserves `rows` whole rows; grows the texture (GPU copy of the old layers) when full.
+    /// Returns the first row and whether the texture was reallocated.
+    fn alloc(&mut self, ctx: &GpuContext, rows: u64) -> Result<(u64, bool), GpuError> {
+        let per_layer = self.layout.rows_per_layer as u64;
+        let have = per_layer * self.layout.layers as u64;
+        let start = self.next_row;
+        let end = start + rows;
+        let mut grown = false;
+        if end > have {
+            let needed = end.div_ceil(per_layer);
+            let want = needed.max(2 * self.layout.layers as u64);
+            let layers = want.min(self.max_layers as u64);
+            if layers < needed {
+                return Err(GpuError::MeshTooLarge {
+                    what: "mesh arena texture array layers",
+                    needed,
+                    limit: self.max_layers as u64,
+                });
+            }
+            let mut layout = self.layout;
+            layout.layers = layers_for(&layout, layers as u32);
+            if layout.layers > self.max_layers {
+                layout.layers = layers as u32;
+            }
+            let texture = arena_texture(&ctx.device, self.label, &layout);
+            let mut enc = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("frcd-gpgpu arena growth"),
+                });
+            enc.copy_texture_to_texture(
+                self.texture.as_image_copy(),
+                texture.as_image_copy(),
+                wgpu::Extent3d {
+                    width: self.layout.width(),
+                    height: self.layout.rows_per_layer,
+                    depth_or_array_layers: self.layout.layers,
+                },
+            );
+            ctx.queue.submit([enc.finish()]);
+            self.view = view_of(&texture, self.label);
+            self.texture = texture;
+            self.layout = layout;
+            grown = true;
+        }
+        self.next_row = end;
+        Ok((start, grown))
+    }
+
+    /// Writes `texels` (whole rows, row-major) from global row `row0` on.
+    fn write(&self, ctx: &GpuContext, row0: u64, texels: &[[f32; 4]]) {
+        let width = self.layout.width() as usize;
+        let per_layer = self.layout.rows_per_layer as u64;
+        let rows = (texels.len() / width) as u64;
+        let mut r = 0u64;
+        while r < rows {
+            let g = row0 + r;
+            let (layer, row) = (g / per_layer, g % per_layer);
+            let n = (per_layer - row).min(rows - r);
+            let chunk = &texels[r as usize * width..(r + n) as usize * width];
+            ctx.queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &self.texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d {
+                        x: 0,
+                        y: row as u32,
+                        z: layer as u32,
+                    },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                bytemuck::cast_slice(chunk),
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(width as u32 * 16),
+                    rows_per_image: Some(n as u32),
+                },
+                wgpu::Extent3d {
+                    width: width as u32,
+                    height: n as u32,
+                    depth_or_array_layers: 1,
+                },
+            );
+            r += n;
+        }
+    }
+}
+
+impl Arena {
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        bgl: &wgpu::BindGroupLayout,
+        limits: &wgpu::Limits,
+        opts: &ArenaOptions,
+    ) -> Result<Self, GpuError> {
+        let nodes = ArenaTex::new(device, "frcd-gpgpu node arena", NODE_TEXELS, opts, limits)?;
+        let tris = ArenaTex::new(
+            device,
+            "frcd-gpgpu triangle arena",
+            TRI_TEXELS,
+            opts,
+            limits,
+        )?;
+        let layout = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("frcd-gpgpu arena layout"),
+            size: 32,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: true,
+        });
+        {
+            let words: [u32; 8] = [
+                nodes.layout.items_per_row,
+                nodes.layout.rows_per_layer,
+                0,
+                0,
+                tris.layout.items_per_row,
+                tris.layout.rows_per_layer,
+                0,
+                0,
+            ];
+            layout
+                .slice(..)
+                .get_mapped_range_mut()
+                .expect("mapped at creation")
+                .copy_from_slice(bytemuck::cast_slice(&words));
+        }
+        layout.unmap();
+        let bind = Self::bind_group(device, bgl, &nodes, &tris, &layout);
+        Ok(Self {
+            nodes,
+            tris,
+            layout,
+            bind,
+            generation: 0,
+        })
+    }
+
+    fn bind_group(
+        device: &wgpu::Device,
+        bgl: &wgpu::BindGroupLayout,
+        nodes: &ArenaTex,
+        tris: &ArenaTex,
+        layout: &wgpu::Buffer,
+    ) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("frcd-gpgpu arena"),
+            layout: bgl,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&nodes.view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&tris.view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: layout.as_entire_binding(),
+                },
+            ],
+        })
+    }
+}
+
+/// One body's OBB tree and triangles resident on the GPU (uploaded once into the context's
+/// arena), plus the f64 triangles the CPU needs to re-decide the pairs the GPU reports.
+///
+/// The arena never frees rows: memory of a dropped mesh is returned when its context is
+/// dropped.
 pub struct GpuMesh {
     pub(crate) ctx_id: u64,
-    pub(crate) id: u64,
-    pub(crate) node_view: wgpu::TextureView,
-    pub(crate) tri_view: wgpu::TextureView,
-    pub(crate) info: wgpu::Buffer,
+    /// First node / first triangle slot in the arena.
+    pub(crate) node_base: u32,
+    pub(crate) tri_base: u32,
     pub(crate) depth: u32,
-    pub(crate) node_layout: TexLayout,
-    pub(crate) tri_layout: TexLayout,
-    pub(crate) triangles: Vec<Triangle>,
+    pub(crate) triangles: Arc<[Triangle]>,
     bytes: u64,
 }
 
@@ -36,8 +306,8 @@ impl std::fmt::Debug for GpuMesh {
         f.debug_struct("GpuMesh")
             .field("triangles", &self.triangles.len())
             .field("depth", &self.depth)
-            .field("node_layout", &self.node_layout)
-            .field("tri_layout", &self.tri_layout)
+            .field("node_base", &self.node_base)
+            .field("tri_base", &self.tri_base)
             .finish()
     }
 }
@@ -51,115 +321,66 @@ impl GpuMesh {
     pub fn depth(&self) -> u32 {
         self.depth
     }
-    /// Placement of the nodes in their texture (rows, layers).
-    pub fn node_layout(&self) -> TexLayout {
-        self.node_layout
-    }
-    /// Placement of the triangles in their texture.
-    pub fn triangle_layout(&self) -> TexLayout {
-        self.tri_layout
-    }
-    /// Bytes uploaded for this mesh (both textures and the description).
+    /// Bytes of arena texture this mesh occupies (whole rows of nodes and triangles).
     pub fn uploaded_bytes(&self) -> u64 {
         self.bytes
     }
 }
 
-fn upload_texture(
-    ctx: &GpuContext,
-    label: &str,
-    layout: &TexLayout,
-    texels: &[[f32; 4]],
-) -> wgpu::TextureView {
-    let size = wgpu::Extent3d {
-        width: layout.width(),
-        height: layout.rows_per_layer,
-        depth_or_array_layers: layout.layers,
-    };
-    let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
-        label: Some(label),
-        size,
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: wgpu::TextureFormat::Rgba32Float,
-        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        view_formats: &[],
-    });
-    ctx.queue.write_texture(
-        wgpu::TexelCopyTextureInfo {
-            texture: &texture,
-            mip_level: 0,
-            origin: wgpu::Origin3d::ZERO,
-            aspect: wgpu::TextureAspect::All,
-        },
-        bytemuck::cast_slice(texels),
-        wgpu::TexelCopyBufferLayout {
-            offset: 0,
-            bytes_per_row: Some(layout.width() * 16),
-            rows_per_image: Some(layout.rows_per_layer),
-        },
-        size,
-    );
-    texture.create_view(&wgpu::TextureViewDescriptor {
-        label: Some(label),
-        dimension: Some(wgpu::TextureViewDimension::D2Array),
-        ..Default::default()
-    })
-}
-
 impl GpuContext {
-    /// Uploads a tree (nodes and triangles, local frame, f32 rounded outward) once; queries then
-    /// upload only poses.
+    /// Uploads a tree (nodes and triangles, local frame, f32 rounded outward) once into the
+    /// context's arena; queries then upload only poses. The arena grows (a GPU copy) when full.
     pub fn upload(&self, tree: &ObbTree) -> Result<GpuMesh, GpuError> {
-        self.upload_with(tree, &UploadOptions::default())
-    }
-
-    /// [`GpuContext::upload`] with texture-size caps.
-    pub fn upload_with(
-        &self,
-        tree: &ObbTree,
-        options: &UploadOptions,
-    ) -> Result<GpuMesh, GpuError> {
-        let dim = self.limits.max_texture_dimension_2d;
-        let limits = TexLimits {
-            max_width: options.max_texture_width.map_or(dim, |w| w.min(dim)),
-            max_rows: options.max_texture_rows.map_or(dim, |r| r.min(dim)),
-            max_layers: self.limits.max_texture_array_layers,
-        };
+        let mut arena = self.arena.lock().unwrap_or_else(|e| e.into_inner());
         let PackedTree {
             nodes,
             node_layout,
             tris,
             tri_layout,
             depth,
-        } = pack_tree(tree, &limits)?;
-        let node_view = upload_texture(self, "frcd-gpgpu nodes", &node_layout, &nodes);
-        let tri_view = upload_texture(self, "frcd-gpgpu triangles", &tri_layout, &tris);
-        let info_words: [u32; 8] = {
-            let n = node_layout.uniform(tree.nodes().len() as u32, depth);
-            let t = tri_layout.uniform(tree.triangles().len() as u32, 0);
-            [n[0], n[1], n[2], n[3], t[0], t[1], t[2], t[3]]
-        };
-        let info = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("frcd-gpgpu mesh info"),
-            size: 32,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        self.queue
-            .write_buffer(&info, 0, bytemuck::cast_slice(&info_words));
-        let bytes = (nodes.len() + tris.len()) as u64 * 16 + 32;
+        } = pack_tree_rows(
+            tree,
+            arena.nodes.layout.items_per_row,
+            arena.tris.layout.items_per_row,
+        )?;
+        let node_rows = node_layout.rows_per_layer as u64;
+        let tri_rows = tri_layout.rows_per_layer as u64;
+        let (node_row, g1) = arena.nodes.alloc(self, node_rows)?;
+        let (tri_row, g2) = arena.tris.alloc(self, tri_rows)?;
+        let node_base = node_row * arena.nodes.layout.items_per_row as u64;
+        let tri_base = tri_row * arena.tris.layout.items_per_row as u64;
+        for (what, base) in [
+            ("node arena slots", node_base),
+            ("triangle arena slots", tri_base),
+        ] {
+            if base + (1 << 24) > u32::MAX as u64 {
+                return Err(GpuError::MeshTooLarge {
+                    what,
+                    needed: base,
+                    limit: u32::MAX as u64 - (1 << 24),
+                });
+            }
+        }
+        arena.nodes.write(self, node_row, &nodes);
+        arena.tris.write(self, tri_row, &tris);
+        if g1 || g2 {
+            let Arena {
+                nodes,
+                tris,
+                layout,
+                ..
+            } = &*arena;
+            let bind = Arena::bind_group(&self.device, &self.pipes.arena_bgl, nodes, tris, layout);
+            arena.bind = bind;
+            arena.generation += 1;
+        }
+        let bytes = (nodes.len() + tris.len()) as u64 * 16;
         Ok(GpuMesh {
             ctx_id: self.id,
-            id: NEXT_MESH_ID.fetch_add(1, Ordering::Relaxed),
-            node_view,
-            tri_view,
-            info,
+            node_base: node_base as u32,
+            tri_base: tri_base as u32,
             depth,
-            node_layout,
-            tri_layout,
-            triangles: tree.triangles().to_vec(),
+            triangles: tree.triangles().into(),
             bytes,
         })
     }

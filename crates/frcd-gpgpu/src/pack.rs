@@ -31,6 +31,12 @@ pub const TRI_TEXELS: u32 = 3;
 pub const MAX_ITEMS: u64 = 1 << 24;
 /// Unit roundoff of f32 round-to-nearest, 2^-24.
 pub const U32: f64 = 1.0 / 16_777_216.0;
+/// Largest magnitude of any coordinate, half extent or relative translation the GPU accepts
+/// (2^36 ≈ 6.9e10): the error bounds of `traverse.wgsl` evaluate cubes of coordinate
+/// differences in f32, which must stay finite (WGSL may assume finite math).
+pub const MAX_MAGNITUDE: f64 = 68_719_476_736.0;
+/// Fewest texture array layers a packed texture gets (see [`TexLayout::new`]).
+pub const MIN_LAYERS: u32 = 2;
 
 /// Where the items of one kind live in a 2D array texture.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -65,11 +71,21 @@ impl TexLayout {
                 limit: max_width as u64,
             });
         }
+        if max_layers < MIN_LAYERS {
+            return Err(GpuError::MeshTooLarge {
+                what: "texture array layers (at least 2 are needed)",
+                needed: MIN_LAYERS as u64,
+                limit: max_layers as u64,
+            });
+        }
         let rows_total = items.div_ceil(per_row_max);
+        // Always at least two layers: wgpu's GL backend makes a one-layer texture a
+        // `TEXTURE_2D`, which a `texture_2d_array` binding then reads as zeros (every box
+        // empty: pairs silently lost). Two layers make it a `TEXTURE_2D_ARRAY` everywhere.
         let (items_per_row, rows, layers) = if rows_total == 1 {
-            (items, 1, 1)
-        } else if rows_total <= max_rows as u64 {
-            (per_row_max, rows_total, 1)
+            (items.div_ceil(2), 1, 2)
+        } else if rows_total <= 2 * max_rows as u64 {
+            (per_row_max, rows_total.div_ceil(2), 2)
         } else {
             let layers = rows_total.div_ceil(max_rows as u64);
             if layers > max_layers as u64 {
@@ -80,6 +96,20 @@ impl TexLayout {
                 });
             }
             (per_row_max, max_rows as u64, layers)
+        };
+        // A square texture with a multiple of 6 layers becomes a cube map on GL: add a layer.
+        let width = items_per_row * texels_per_item as u64;
+        let layers = if width == rows && layers % 6 == 0 {
+            if layers + 1 > max_layers as u64 {
+                return Err(GpuError::MeshTooLarge {
+                    what: "texture array layers",
+                    needed: layers + 1,
+                    limit: max_layers as u64,
+                });
+            }
+            layers + 1
+        } else {
+            layers
         };
         Ok(Self {
             texels_per_item,
@@ -191,6 +221,18 @@ pub fn obb_to_f32(obb: &Obb, node: usize) -> Result<ObbF32, GpuError> {
             "OBB node {node} is not finite or has a negative extent"
         )));
     }
+    let mag = obb
+        .center
+        .abs()
+        .max_element()
+        .max(obb.half_extents.max_element());
+    if mag > MAX_MAGNITUDE {
+        return Err(GpuError::MagnitudeOutOfRange {
+            what: format!("OBB node {node}"),
+            value: mag,
+            limit: MAX_MAGNITUDE,
+        });
+    }
     let gram = a.transpose() * a - DMat3::IDENTITY;
     let deviation = [gram.x_axis, gram.y_axis, gram.z_axis]
         .iter()
@@ -281,6 +323,58 @@ pub fn pack_tree(tree: &ObbTree, limits: &TexLimits) -> Result<PackedTree, GpuEr
         limits.max_rows,
         limits.max_layers,
     )?;
+    pack_into(tree, node_layout, tri_layout)
+}
+
+/// Packs a tree into whole rows of `node_items_per_row` nodes and `tri_items_per_row`
+/// triangles (one "layer" of as many rows as needed): the rows a mesh takes in the arena.
+pub fn pack_tree_rows(
+    tree: &ObbTree,
+    node_items_per_row: u32,
+    tri_items_per_row: u32,
+) -> Result<PackedTree, GpuError> {
+    let rows = |n: usize, per: u32, tpi: u32| TexLayout {
+        texels_per_item: tpi,
+        items_per_row: per.max(1),
+        rows_per_layer: (n.max(1) as u64).div_ceil(per.max(1) as u64) as u32,
+        layers: 1,
+    };
+    let node_layout = rows(tree.nodes().len(), node_items_per_row, NODE_TEXELS);
+    let tri_layout = rows(tree.triangles().len(), tri_items_per_row, TRI_TEXELS);
+    pack_into(tree, node_layout, tri_layout)
+}
+
+fn pack_into(
+    tree: &ObbTree,
+    node_layout: TexLayout,
+    tri_layout: TexLayout,
+) -> Result<PackedTree, GpuError> {
+    let nodes = tree.nodes();
+    let order = tree.leaf_triangles();
+    let tris = tree.triangles();
+    if nodes.is_empty() || tris.is_empty() {
+        return Err(GpuError::InvalidInput("empty tree".into()));
+    }
+    for (what, n) in [("nodes", nodes.len()), ("triangles", tris.len())] {
+        if n as u64 >= MAX_ITEMS {
+            return Err(GpuError::MeshTooLarge {
+                what: if what == "nodes" {
+                    "node count (f32-exact indices)"
+                } else {
+                    "triangle count (f32-exact indices)"
+                },
+                needed: n as u64,
+                limit: MAX_ITEMS - 1,
+            });
+        }
+    }
+    if order.len() != tris.len() {
+        return Err(GpuError::InvalidInput(format!(
+            "leaf order has {} entries for {} triangles",
+            order.len(),
+            tris.len()
+        )));
+    }
     let mut node_texels = vec![[0f32; 4]; node_layout.texel_count()];
     for (i, n) in nodes.iter().enumerate() {
         let ok = if n.is_leaf() {
@@ -315,6 +409,18 @@ pub fn pack_tree(tree: &ObbTree, limits: &TexLimits) -> Result<PackedTree, GpuEr
                 "triangle {index} has a non-finite coordinate"
             )));
         }
+        let mag = tri
+            .v
+            .iter()
+            .map(|p| p.abs().max_element())
+            .fold(0.0, f64::max);
+        if mag > MAX_MAGNITUDE {
+            return Err(GpuError::MagnitudeOutOfRange {
+                what: format!("triangle {index}"),
+                value: mag,
+                limit: MAX_MAGNITUDE,
+            });
+        }
         for k in 0..3 {
             let p = v3(tri.v[k]);
             let w = if k == 0 { index as f32 } else { 0.0 };
@@ -339,9 +445,22 @@ mod tests {
     #[test]
     fn layout_single_row_rows_and_layers() {
         let l = TexLayout::new(10, 5, 1000, 100, 4).unwrap();
-        assert_eq!((l.items_per_row, l.rows_per_layer, l.layers), (10, 1, 1));
+        assert_eq!((l.items_per_row, l.rows_per_layer, l.layers), (5, 1, 2));
         let l = TexLayout::new(10, 5, 12, 100, 4).unwrap();
-        assert_eq!((l.items_per_row, l.rows_per_layer, l.layers), (2, 5, 1));
+        assert_eq!((l.items_per_row, l.rows_per_layer, l.layers), (2, 3, 2));
+        // Never one layer (GL), never square with 6k layers (GL cube maps).
+        for n in 1..200 {
+            for (w, r) in [(5, 1), (10, 2), (15, 3), (30, 6)] {
+                if let Ok(l) = TexLayout::new(n, 5, w, r, 64) {
+                    assert!(l.layers >= 2, "{n} {w} {r}");
+                    assert!(!(l.width() == l.rows_per_layer && l.layers % 6 == 0));
+                    assert!(
+                        l.items_per_row as usize * l.rows_per_layer as usize * l.layers as usize
+                            >= n
+                    );
+                }
+            }
+        }
         let l = TexLayout::new(10, 5, 12, 2, 4).unwrap();
         assert_eq!((l.items_per_row, l.rows_per_layer, l.layers), (2, 2, 3));
         assert!(matches!(

@@ -1,32 +1,43 @@
 use crate::{GpuContext, GpuError, GpuMesh};
-use frcd_geom::Pose;
+use frcd_geom::{Pose, Triangle};
+use frcd_gpu::layout::{PairInfo, Params, State};
 use frcd_obb::RelativeFrame;
 use frcd_tritri::Method;
+use std::sync::Arc;
 
-/// Bit 31 of an output entry's second word: the GPU could not decide the pair.
+/// Bit 31 of an output entry's third word: the GPU could not decide the pair.
 const UNCERTAIN_FLAG: u32 = 0x8000_0000;
-/// Bytes of the `State` struct shared with the shaders.
-const STATE_BYTES: u64 = 32;
+/// Bytes of the `State` struct shared with the shaders (prelude).
+const STATE_BYTES: u64 = std::mem::size_of::<State>() as u64;
+/// Bytes of one frontier or output entry (`vec4<u32>`).
+const ENTRY_BYTES: u64 = 16;
+/// Bytes of one `PairInfo` (prelude).
+const PAIR_BYTES: u64 = std::mem::size_of::<PairInfo>() as u64;
 /// Re-runs allowed after overflows before giving up (each at least doubles a buffer).
 const MAX_RERUNS: u32 = 32;
 
-/// The answer of [`GpuContext::collide`].
+/// The answer for one body pair ([`GpuContext::collide`], or one entry of
+/// [`GpuBatch::results`]).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct GpuCollision {
     /// Every touching triangle pair `(tri_a, tri_b)` (input-mesh indices), sorted ascending:
     /// equal to the exact oracle's answer (surface mode).
     pub pairs: Vec<(u32, u32)>,
-    /// Pairs the GPU decided on its own (all of them touching).
+    /// Pairs the GPU decided as touching and the CPU's exact re-check confirmed.
     pub gpu_decided: usize,
-    /// Pairs the GPU flagged uncertain, re-decided on the CPU with the exact test.
+    /// Pairs the GPU decided as touching that the CPU's exact re-check found disjoint (dropped
+    /// from [`GpuCollision::pairs`]; 0 unless a driver breaks the certified bounds).
+    pub gpu_refuted: usize,
+    /// Pairs the GPU flagged uncertain, decided on the CPU with the exact test.
     pub uncertain: usize,
-    /// Node pairs the GPU tested (separating-axis tests).
+    /// Node pairs the GPU tested (separating-axis tests), for the whole batch.
     pub node_pairs_tested: u64,
-    /// Traversal levels that had work.
+    /// Traversal levels that had work, for the whole batch.
     pub levels: u32,
-    /// Command-buffer submissions this query made (1 unless a buffer overflowed).
+    /// Command-buffer submissions the batch made (1 unless a buffer overflowed; 0 when the
+    /// commands were recorded into the caller's encoder and did not overflow).
     pub submissions: u32,
-    /// Readbacks this query made (1 unless a buffer overflowed).
+    /// Readbacks the batch made (1 unless a buffer overflowed).
     pub readbacks: u32,
     /// Re-runs after an overflow.
     pub reruns: u32,
@@ -39,32 +50,51 @@ impl GpuCollision {
     }
 }
 
+/// The answer of [`GpuContext::collide_batch`]: one [`GpuCollision`] per body pair, in input
+/// order, plus the batch's counters.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct GpuBatch {
+    /// One answer per body pair, in input order.
+    pub results: Vec<GpuCollision>,
+    /// Node pairs the GPU tested.
+    pub node_pairs_tested: u64,
+    /// Traversal levels that had work.
+    pub levels: u32,
+    /// Submissions made by frcd-gpgpu for this batch (1; 0 when recorded into the caller's
+    /// encoder; plus one per overflow re-run).
+    pub submissions: u32,
+    /// Readbacks (1 plus one per overflow re-run).
+    pub readbacks: u32,
+    /// Re-runs after an overflow.
+    pub reruns: u32,
+}
+
+/// One body pair of a batch: `(mesh_a, pose_a, mesh_b, pose_b)`.
+pub type BodyPair<'a> = (&'a GpuMesh, &'a Pose, &'a GpuMesh, &'a Pose);
+
 struct Buffers {
     ctx_id: u64,
     frontier_cap: u32,
     output_cap: u32,
-    // `frontier` and `params` are reached through the bind groups; kept here to own them.
-    #[allow(dead_code)]
+    pair_cap: u32,
     frontier: [wgpu::Buffer; 2],
     state: wgpu::Buffer,
     args: wgpu::Buffer,
     out: wgpu::Buffer,
-    #[allow(dead_code)]
     params: wgpu::Buffer,
-    pose: wgpu::Buffer,
+    pairs: wgpu::Buffer,
     staging: wgpu::Buffer,
     trav_bg: [wgpu::BindGroup; 2],
     ctrl_bg: wgpu::BindGroup,
-    /// Bind group of the last mesh pair, keyed by mesh ids.
-    mesh_bg: Option<((u64, u64), wgpu::BindGroup)>,
 }
 
-/// Caller-owned GPU buffers of pair queries (frontiers, output, staging), grown on overflow and
-/// kept for the next query. One per thread issuing queries; tied to the first context it is
-/// used with.
+/// Caller-owned GPU buffers of pair queries (frontiers, output, pair table, staging), sized by
+/// capacity, grown on overflow and kept for the next frame. One per thread issuing queries;
+/// tied to the first context it is used with.
 pub struct QueryScratch {
     frontier_cap: u32,
     output_cap: u32,
+    pair_cap: u32,
     bufs: Option<Buffers>,
 }
 
@@ -79,17 +109,19 @@ impl std::fmt::Debug for QueryScratch {
         f.debug_struct("QueryScratch")
             .field("frontier_capacity", &self.frontier_cap)
             .field("output_capacity", &self.output_cap)
+            .field("pair_capacity", &self.pair_cap)
             .finish()
     }
 }
 
 impl QueryScratch {
     /// Scratch whose first buffers hold `frontier` node pairs per level and `output` triangle
-    /// pairs (at least 1 each). Too small is only slower: overflow re-runs the query.
+    /// pairs (at least 1 each). Too small is only slower: overflow re-runs the batch.
     pub fn with_capacity(frontier: u32, output: u32) -> Self {
         Self {
             frontier_cap: frontier.max(1),
             output_cap: output.max(1),
+            pair_cap: 16,
             bufs: None,
         }
     }
@@ -99,12 +131,17 @@ impl QueryScratch {
         (self.frontier_cap, self.output_cap)
     }
 
-    fn ensure(&mut self, ctx: &GpuContext) -> Result<(), GpuError> {
+    fn ensure(&mut self, ctx: &GpuContext, pairs: u32) -> Result<(), GpuError> {
+        self.pair_cap = self.pair_cap.max(pairs.next_power_of_two());
+        self.frontier_cap = self.frontier_cap.max(pairs);
         if let Some(b) = &self.bufs {
             if b.ctx_id != ctx.id {
                 return Err(GpuError::ForeignObject("QueryScratch"));
             }
-            if b.frontier_cap == self.frontier_cap && b.output_cap == self.output_cap {
+            if b.frontier_cap == self.frontier_cap
+                && b.output_cap == self.output_cap
+                && b.pair_cap == self.pair_cap
+            {
                 return Ok(());
             }
         }
@@ -118,34 +155,30 @@ impl QueryScratch {
                 limit: dispatchable,
             });
         }
+        let fsize = self.frontier_cap as u64 * ENTRY_BYTES;
+        let osize = self.output_cap as u64 * ENTRY_BYTES;
+        let psize = self.pair_cap as u64 * PAIR_BYTES;
         ctx.check_storage(&[
-            ("frontier", self.frontier_cap as u64 * 8),
-            ("output", self.output_cap as u64 * 8),
+            ("frontier", fsize),
+            ("output", osize),
+            ("pair table", psize),
         ])?;
         use wgpu::BufferUsages as B;
         let d = &ctx.device;
         let buf = |label: &str, size: u64, usage: B| ctx.buffer(label, size, usage);
-        let fsize = self.frontier_cap as u64 * 8;
-        let osize = self.output_cap as u64 * 8;
         let frontier = [
-            buf("frcd-gpgpu frontier 0", fsize, B::STORAGE),
+            buf("frcd-gpgpu frontier 0", fsize, B::STORAGE | B::COPY_DST),
             buf("frcd-gpgpu frontier 1", fsize, B::STORAGE),
         ];
         let state = buf("frcd-gpgpu state", STATE_BYTES, B::STORAGE | B::COPY_SRC);
         let args = buf("frcd-gpgpu indirect args", 16, B::STORAGE | B::INDIRECT);
         let out = buf("frcd-gpgpu output", osize, B::STORAGE | B::COPY_SRC);
         let params = buf("frcd-gpgpu params", 16, B::UNIFORM | B::COPY_DST);
-        let pose = buf("frcd-gpgpu pose", 64, B::UNIFORM | B::COPY_DST);
+        let pairs = buf("frcd-gpgpu pair table", psize, B::STORAGE | B::COPY_DST);
         let staging = buf(
             "frcd-gpgpu staging",
             STATE_BYTES + osize,
             B::MAP_READ | B::COPY_DST,
-        );
-        let max_groups = ctx.limits.max_compute_workgroups_per_dimension;
-        ctx.queue.write_buffer(
-            &params,
-            0,
-            bytemuck::cast_slice(&[self.frontier_cap, self.output_cap, max_groups, 0]),
         );
         let trav = |input: &wgpu::Buffer, output: &wgpu::Buffer| {
             d.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -157,6 +190,7 @@ impl QueryScratch {
                     crate::context::entry(2, &state),
                     crate::context::entry(3, &out),
                     crate::context::entry(4, &params),
+                    crate::context::entry(5, &pairs),
                 ],
             })
         };
@@ -170,32 +204,40 @@ impl QueryScratch {
             entries: &[
                 crate::context::entry(0, &state),
                 crate::context::entry(1, &args),
-                crate::context::entry(2, &frontier[0]),
-                crate::context::entry(3, &params),
+                crate::context::entry(2, &params),
             ],
         });
         self.bufs = Some(Buffers {
             ctx_id: ctx.id,
             frontier_cap: self.frontier_cap,
             output_cap: self.output_cap,
+            pair_cap: self.pair_cap,
             frontier,
             state,
             args,
             out,
             params,
-            pose,
+            pairs,
             staging,
             trav_bg,
             ctrl_bg,
-            mesh_bg: None,
         });
         Ok(())
     }
 }
 
-/// The relative pose as the shader's uniform: rows of R, then t (f32, rounded to nearest; the
-/// shaders' error bounds include this rounding).
-fn pose_words(frame: &RelativeFrame) -> [f32; 16] {
+/// A batch checked and converted for the GPU; independent of the meshes' lifetimes.
+struct Prepared {
+    /// One `PairInfo` per pair.
+    infos: Vec<PairInfo>,
+    frames: Vec<RelativeFrame>,
+    tris: Vec<(Arc<[Triangle]>, Arc<[Triangle]>)>,
+    levels: u32,
+}
+
+/// The relative pose as the shader's `PairInfo`: rows of R, then t (f32, rounded to nearest;
+/// the shaders' error bounds include this rounding), then the meshes' arena bases.
+fn pair_info(frame: &RelativeFrame, a: &GpuMesh, b: &GpuMesh) -> PairInfo {
     let m = frame.m;
     let row = |k: usize| {
         [
@@ -205,18 +247,49 @@ fn pose_words(frame: &RelativeFrame) -> [f32; 16] {
             0.0,
         ]
     };
-    let (r0, r1, r2) = (row(0), row(1), row(2));
-    let t = frame.t;
-    [
-        r0[0], r0[1], r0[2], 0.0, r1[0], r1[1], r1[2], 0.0, r2[0], r2[1], r2[2], 0.0, t.x as f32,
-        t.y as f32, t.z as f32, 0.0,
-    ]
+    PairInfo {
+        r0: row(0),
+        r1: row(1),
+        r2: row(2),
+        t: [frame.t.x as f32, frame.t.y as f32, frame.t.z as f32, 0.0],
+        base: [a.node_base, a.tri_base, b.node_base, b.tri_base],
+    }
+}
+
+/// A batch recorded into the caller's command encoder by [`GpuContext::encode_batch`]. Submit
+/// the encoder, then call [`PendingBatch::resolve`] with the submission index: it waits for that
+/// submission only.
+#[must_use = "a pending batch does nothing until resolved"]
+pub struct PendingBatch<'s> {
+    ctx: &'s GpuContext,
+    scratch: &'s mut QueryScratch,
+    prepared: Prepared,
+}
+
+impl std::fmt::Debug for PendingBatch<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PendingBatch")
+            .field("pairs", &self.prepared.frames.len())
+            .finish()
+    }
+}
+
+impl PendingBatch<'_> {
+    /// Reads the answer of a batch whose encoder the caller submitted as `submission` (the
+    /// index `Queue::submit` returned). Waits for that submission only. On a buffer overflow the
+    /// batch is re-run on frcd-gpgpu's own submissions (counted in the answer).
+    pub fn resolve(self, submission: wgpu::SubmissionIndex) -> Result<GpuBatch, GpuError> {
+        let mut answer = GpuBatch::default();
+        self.ctx
+            .run(&self.prepared, self.scratch, &mut answer, Some(submission))
+    }
 }
 
 impl GpuContext {
     /// Every touching triangle pair of two uploaded meshes at two poses (surface mode), equal to
-    /// [`frcd_obb::oracle::pairs`]. One submission and one readback, unless a buffer of
-    /// `scratch` overflows: then the query is re-run with larger buffers (counted in the answer).
+    /// [`frcd_obb::oracle::pairs`]. A batch of one ([`GpuContext::collide_batch`]): one
+    /// submission and one readback, unless a buffer of `scratch` overflows: then the query is
+    /// re-run with larger buffers (counted in the answer).
     pub fn collide(
         &self,
         a: &GpuMesh,
@@ -225,99 +298,199 @@ impl GpuContext {
         pose_b: &Pose,
         scratch: &mut QueryScratch,
     ) -> Result<GpuCollision, GpuError> {
-        for m in [a, b] {
-            if m.ctx_id != self.id {
-                return Err(GpuError::ForeignObject("GpuMesh"));
-            }
+        let batch = self.collide_batch(&[(a, pose_a, b, pose_b)], scratch)?;
+        let mut r = batch.results.into_iter().next().unwrap_or_default();
+        r.submissions = batch.submissions;
+        r.readbacks = batch.readbacks;
+        r.reruns = batch.reruns;
+        Ok(r)
+    }
+
+    /// Every touching triangle pair of every body pair of a frame, in **one** dispatch chain,
+    /// **one** submission and **one** readback (plus one of each per overflow re-run): the
+    /// frontier carries the pair index, all meshes live in the context's arena. Each result
+    /// equals [`frcd_obb::oracle::pairs`] for its pair.
+    ///
+    /// ```no_run
+    /// # use frcd_gpgpu::{GpuContext, QueryScratch};
+    /// # use frcd_obb::{BuildOptions, ObbTree};
+    /// # use frcd_geom::{shapes, DVec3, Pose};
+    /// let ctx = GpuContext::headless()?;
+    /// let m = ctx.upload(&ObbTree::build(&shapes::icosphere(1.0, 3), &BuildOptions::default()))?;
+    /// let poses: Vec<Pose> = (0..4).map(|k| Pose::from_translation(DVec3::X * k as f64)).collect();
+    /// let pairs: Vec<_> = (0..3).map(|k| (&m, &poses[k], &m, &poses[k + 1])).collect();
+    /// let frame = ctx.collide_batch(&pairs, &mut QueryScratch::default())?;
+    /// assert_eq!(frame.results.len(), 3);
+    /// assert_eq!(frame.submissions, 1);
+    /// # Ok::<(), frcd_gpgpu::GpuError>(())
+    /// ```
+    pub fn collide_batch(
+        &self,
+        pairs: &[BodyPair<'_>],
+        scratch: &mut QueryScratch,
+    ) -> Result<GpuBatch, GpuError> {
+        if pairs.is_empty() {
+            return Ok(GpuBatch::default());
         }
-        for (name, p) in [("pose_a", pose_a), ("pose_b", pose_b)] {
-            if !p.is_valid() {
-                return Err(GpuError::InvalidInput(format!(
-                    "{name} is not finite or its rotation is not a unit quaternion: {p:?}"
-                )));
-            }
+        let prepared = self.prepare(pairs)?;
+        let mut answer = GpuBatch::default();
+        self.run(&prepared, scratch, &mut answer, None)
+    }
+
+    /// Records a batch into the caller's command encoder (an engine's frame) and returns a
+    /// [`PendingBatch`]; after submitting the encoder, [`PendingBatch::resolve`] reads the
+    /// answer, waiting on that submission only. Buffer uploads (poses, root pairs) are queued
+    /// with `Queue::write_buffer` and land before the caller's submission.
+    pub fn encode_batch<'s>(
+        &'s self,
+        encoder: &mut wgpu::CommandEncoder,
+        pairs: &[BodyPair<'_>],
+        scratch: &'s mut QueryScratch,
+    ) -> Result<PendingBatch<'s>, GpuError> {
+        let prepared = self.prepare(pairs)?;
+        self.record(encoder, &prepared, scratch)?;
+        Ok(PendingBatch {
+            ctx: self,
+            scratch,
+            prepared,
+        })
+    }
+
+    fn prepare(&self, pairs: &[BodyPair<'_>]) -> Result<Prepared, GpuError> {
+        if pairs.len() as u64 >= u32::MAX as u64 / 2 {
+            return Err(GpuError::CapacityExceeded {
+                what: "body pairs in one batch",
+                needed: pairs.len() as u64,
+                limit: u32::MAX as u64 / 2,
+            });
         }
-        let frame = RelativeFrame::new(pose_a, pose_b);
-        let levels = a.depth.max(b.depth);
-        let mut answer = GpuCollision::default();
-        let words = loop {
-            scratch.ensure(self)?;
-            let bufs = scratch.bufs.as_mut().expect("ensured");
-            let key = (a.id, b.id);
-            if bufs.mesh_bg.as_ref().map(|(k, _)| *k) != Some(key) {
-                let bg = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("frcd-gpgpu meshes"),
-                    layout: &self.pipes.mesh_bgl,
-                    entries: &[
-                        wgpu::BindGroupEntry {
-                            binding: 0,
-                            resource: wgpu::BindingResource::TextureView(&a.node_view),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 1,
-                            resource: wgpu::BindingResource::TextureView(&a.tri_view),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: wgpu::BindingResource::TextureView(&b.node_view),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 3,
-                            resource: wgpu::BindingResource::TextureView(&b.tri_view),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 4,
-                            resource: a.info.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 5,
-                            resource: b.info.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 6,
-                            resource: bufs.pose.as_entire_binding(),
-                        },
-                    ],
-                });
-                bufs.mesh_bg = Some((key, bg));
-            }
-            // The only per-query upload: the relative pose (64 bytes).
-            self.queue
-                .write_buffer(&bufs.pose, 0, bytemuck::cast_slice(&pose_words(&frame)));
-            let mut enc = self
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("frcd-gpgpu query"),
-                });
-            {
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("frcd-gpgpu traversal"),
-                    timestamp_writes: None,
-                });
-                pass.set_pipeline(&self.pipes.init);
-                pass.set_bind_group(0, &bufs.ctrl_bg, &[]);
-                pass.dispatch_workgroups(1, 1, 1);
-                let mesh_bg = &bufs.mesh_bg.as_ref().expect("set above").1;
-                // `init` put the root pair in frontier 0; level k reads frontier k % 2.
-                for level in 0..levels as usize {
-                    pass.set_pipeline(&self.pipes.traverse);
-                    pass.set_bind_group(0, mesh_bg, &[]);
-                    pass.set_bind_group(1, &bufs.trav_bg[level % 2], &[]);
-                    pass.dispatch_workgroups_indirect(&bufs.args, 0);
-                    pass.set_pipeline(&self.pipes.prepare);
-                    pass.set_bind_group(0, &bufs.ctrl_bg, &[]);
-                    pass.dispatch_workgroups(1, 1, 1);
+        let mut p = Prepared {
+            infos: Vec::with_capacity(pairs.len()),
+            frames: Vec::with_capacity(pairs.len()),
+            tris: Vec::with_capacity(pairs.len()),
+            levels: 0,
+        };
+        for (k, &(a, pose_a, b, pose_b)) in pairs.iter().enumerate() {
+            for m in [a, b] {
+                if m.ctx_id != self.id {
+                    return Err(GpuError::ForeignObject("GpuMesh"));
                 }
             }
-            enc.copy_buffer_to_buffer(&bufs.state, 0, &bufs.staging, 0, STATE_BYTES);
-            let out_bytes = bufs.output_cap as u64 * 8;
-            enc.copy_buffer_to_buffer(&bufs.out, 0, &bufs.staging, STATE_BYTES, out_bytes);
-            self.submit(enc.finish());
-            answer.submissions += 1;
-            let bytes = self.read_back(&bufs.staging, STATE_BYTES + out_bytes)?;
+            for (name, pose) in [("pose_a", pose_a), ("pose_b", pose_b)] {
+                if !pose.is_valid() {
+                    return Err(GpuError::InvalidInput(format!(
+                        "pair {k}: {name} is not finite or its rotation is not a unit \
+                         quaternion: {pose:?}"
+                    )));
+                }
+            }
+            let frame = RelativeFrame::new(pose_a, pose_b);
+            let tmag = frame.t.abs().max_element();
+            if tmag > crate::pack::MAX_MAGNITUDE {
+                return Err(GpuError::MagnitudeOutOfRange {
+                    what: format!("pair {k}: translation of pose_b in pose_a's frame"),
+                    value: tmag,
+                    limit: crate::pack::MAX_MAGNITUDE,
+                });
+            }
+            p.infos.push(pair_info(&frame, a, b));
+            p.frames.push(frame);
+            p.tris.push((a.triangles.clone(), b.triangles.clone()));
+            p.levels = p.levels.max(a.depth.max(b.depth));
+        }
+        Ok(p)
+    }
+
+    /// Sizes the scratch, queues the uploads and records the dispatch chain and the copies to
+    /// the staging buffer.
+    fn record(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        p: &Prepared,
+        scratch: &mut QueryScratch,
+    ) -> Result<(), GpuError> {
+        let n = p.frames.len() as u32;
+        scratch.ensure(self, n)?;
+        let bufs = scratch.bufs.as_ref().expect("ensured");
+        let max_groups = self.limits.max_compute_workgroups_per_dimension;
+        self.queue.write_buffer(
+            &bufs.params,
+            0,
+            bytemuck::bytes_of(&Params {
+                caps: [bufs.frontier_cap, bufs.output_cap, max_groups, n],
+            }),
+        );
+        if n == 0 {
+            // Still a valid chain: `init` sets an empty frontier.
+            self.queue
+                .write_buffer(&bufs.pairs, 0, &[0u8; PAIR_BYTES as usize]);
+        } else {
+            self.queue
+                .write_buffer(&bufs.pairs, 0, bytemuck::cast_slice(&p.infos));
+            let roots: Vec<[u32; 4]> = (0..n).map(|k| [k, 0, 0, 0]).collect();
+            self.queue
+                .write_buffer(&bufs.frontier[0], 0, bytemuck::cast_slice(&roots));
+        }
+        let arena_bg = self
+            .arena
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .bind
+            .clone();
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("frcd-gpgpu traversal"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipes.init);
+            pass.set_bind_group(0, &bufs.ctrl_bg, &[]);
+            pass.dispatch_workgroups(1, 1, 1);
+            // Level k reads frontier k % 2.
+            for level in 0..p.levels as usize {
+                pass.set_pipeline(&self.pipes.traverse);
+                pass.set_bind_group(0, &arena_bg, &[]);
+                pass.set_bind_group(1, &bufs.trav_bg[level % 2], &[]);
+                pass.dispatch_workgroups_indirect(&bufs.args, 0);
+                pass.set_pipeline(&self.pipes.prepare);
+                pass.set_bind_group(0, &bufs.ctrl_bg, &[]);
+                pass.dispatch_workgroups(1, 1, 1);
+            }
+        }
+        enc.copy_buffer_to_buffer(&bufs.state, 0, &bufs.staging, 0, STATE_BYTES);
+        let out_bytes = bufs.output_cap as u64 * ENTRY_BYTES;
+        enc.copy_buffer_to_buffer(&bufs.out, 0, &bufs.staging, STATE_BYTES, out_bytes);
+        Ok(())
+    }
+
+    /// Reads back (after `first`, the caller's submission, when given; else records and
+    /// submits its own), re-runs on overflow, and decides every reported pair exactly.
+    fn run(
+        &self,
+        p: &Prepared,
+        scratch: &mut QueryScratch,
+        answer: &mut GpuBatch,
+        mut first: Option<wgpu::SubmissionIndex>,
+    ) -> Result<GpuBatch, GpuError> {
+        let words = loop {
+            let index = match first.take() {
+                Some(i) => i,
+                None => {
+                    let mut enc =
+                        self.device
+                            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                                label: Some("frcd-gpgpu batch"),
+                            });
+                    self.record(&mut enc, p, scratch)?;
+                    answer.submissions += 1;
+                    self.submit(enc.finish())
+                }
+            };
+            let bufs = scratch.bufs.as_ref().expect("recorded");
+            let out_bytes = bufs.output_cap as u64 * ENTRY_BYTES;
+            let bytes = self.read_back(&bufs.staging, STATE_BYTES + out_bytes, index)?;
             answer.readbacks += 1;
-            let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
-            let (cur, out_count, needed) = (words[0], words[2], words[3]);
+            let state: State = bytemuck::pod_read_unaligned(&bytes[..STATE_BYTES as usize]);
+            let (cur, out_count, needed) = (state.cur, state.out, state.needed);
             let mut rerun = false;
             if needed > bufs.frontier_cap {
                 scratch.frontier_cap = needed.max(bufs.frontier_cap.saturating_mul(2));
@@ -343,47 +516,68 @@ impl GpuContext {
             }
             if cur != 0 {
                 return Err(GpuError::Internal(format!(
-                    "{cur} node pairs left after {levels} levels (tree depths {} and {})",
-                    a.depth, b.depth
+                    "{cur} node pairs left after {} levels",
+                    p.levels
                 )));
             }
-            answer.levels = words[4];
-            answer.node_pairs_tested = words[5] as u64;
-            break words;
+            answer.levels = state.levels;
+            answer.node_pairs_tested = state.pairs_tested as u64;
+            break (state, bytes);
         };
-        let out_count = words[2] as usize;
-        let entries = &words[(STATE_BYTES / 4) as usize..][..out_count * 2];
-        let mut pairs = Vec::with_capacity(out_count);
-        for e in entries.chunks_exact(2) {
-            let (ia, tag) = (e[0], e[1]);
+        let (state, bytes) = words;
+        let out_count = state.out as usize;
+        let entries: Vec<u32> = bytemuck::pod_collect_to_vec(
+            &bytes[STATE_BYTES as usize..][..out_count * ENTRY_BYTES as usize],
+        );
+        let mut results = vec![GpuCollision::default(); p.frames.len()];
+        for e in entries.chunks_exact(4) {
+            let (k, ia, tag) = (e[0] as usize, e[1], e[2]);
             let ib = tag & !UNCERTAIN_FLAG;
-            let (ta, tb) = match (a.triangles.get(ia as usize), b.triangles.get(ib as usize)) {
+            let (Some(frame), Some((ta, tb))) = (p.frames.get(k), p.tris.get(k)) else {
+                return Err(GpuError::Internal(format!("pair index {k} out of range")));
+            };
+            let (ta, tb) = match (ta.get(ia as usize), tb.get(ib as usize)) {
                 (Some(ta), Some(tb)) => (ta, tb),
                 _ => {
                     return Err(GpuError::Internal(format!(
-                        "triangle pair ({ia}, {ib}) out of range"
+                        "pair {k}: triangle pair ({ia}, {ib}) out of range"
                     )));
                 }
             };
+            let r = &mut results[k];
+            // Every pair is re-decided exactly: the GPU's "touching" is not trusted (WGSL's
+            // float rules, a driver bug); the exact test's filter makes this a few hundred
+            // nanoseconds per reported pair, small next to the readback.
+            let touch = frcd_tritri::intersects(Method::Exact, ta, &frame.triangle(tb));
             if tag & UNCERTAIN_FLAG == 0 {
-                answer.gpu_decided += 1;
-                pairs.push((ia, ib));
-            } else {
-                answer.uncertain += 1;
-                if frcd_tritri::intersects(Method::Exact, ta, &frame.triangle(tb)) {
-                    pairs.push((ia, ib));
+                if touch {
+                    r.gpu_decided += 1;
+                } else {
+                    r.gpu_refuted += 1;
                 }
+            } else {
+                r.uncertain += 1;
+            }
+            if touch {
+                r.pairs.push((ia, ib));
             }
         }
-        pairs.sort_unstable();
-        let before = pairs.len();
-        pairs.dedup();
-        if pairs.len() != before {
-            return Err(GpuError::Internal(
-                "a triangle pair was reported twice".into(),
-            ));
+        for r in &mut results {
+            r.pairs.sort_unstable();
+            let before = r.pairs.len();
+            r.pairs.dedup();
+            if r.pairs.len() != before {
+                return Err(GpuError::Internal(
+                    "a triangle pair was reported twice".into(),
+                ));
+            }
+            r.levels = answer.levels;
+            r.node_pairs_tested = answer.node_pairs_tested;
+            r.submissions = answer.submissions;
+            r.readbacks = answer.readbacks;
+            r.reruns = answer.reruns;
         }
-        answer.pairs = pairs;
-        Ok(answer)
+        answer.results = results;
+        Ok(std::mem::take(answer))
     }
 }

@@ -1,11 +1,11 @@
-//! The WGSL sources (from `shaders/gpgpu/`), compiled into the crate.
+//! The WGSL sources (from the crate's `shaders/`), compiled into the crate.
 
 /// One level of the pair-tree traversal: OBB separating-axis test and triangle test.
-pub const TRAVERSE: &str = include_str!("../../../shaders/gpgpu/traverse.wgsl");
+pub const TRAVERSE: &str = include_str!("../shaders/traverse.wgsl");
 /// Single-invocation control passes: query start and per-level indirect arguments.
-pub const CONTROL: &str = include_str!("../../../shaders/gpgpu/control.wgsl");
+pub const CONTROL: &str = include_str!("../shaders/control.wgsl");
 /// All-pairs box overlap of many bodies.
-pub const BOXES: &str = include_str!("../../../shaders/gpgpu/boxes.wgsl");
+pub const BOXES: &str = include_str!("../shaders/boxes.wgsl");
 
 /// Every shader of the crate as `(file name, source)`.
 pub const ALL: [(&str, &str); 3] = [

@@ -4,7 +4,9 @@
 
 use frcd_geom::shapes::{self, TorusKnotParams};
 use frcd_geom::{Aabb, DQuat, DVec3, Pose, TriMesh};
-use frcd_gpgpu::{BoxScratch, GpuContext, GpuError, GpuMesh, QueryScratch, UploadOptions};
+use frcd_gpgpu::{
+    ArenaOptions, BoxScratch, GpuContext, GpuError, GpuMesh, HeadlessOptions, QueryScratch,
+};
 use frcd_obb::{BuildOptions, ObbTree, oracle};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -305,22 +307,27 @@ fn overflow_is_detected_and_the_query_rerun() {
 
 #[test]
 fn meshes_split_across_rows_and_layers() {
-    let Some(ctx) = shared() else { return };
-    let mesh = shapes::icosphere(1.0, 3);
-    let t = tree(&mesh);
-    let opts = UploadOptions {
-        max_texture_width: Some(16),
-        max_texture_rows: Some(8),
+    // A tiny arena (3 items per row, 4 rows per layer): every mesh spans many rows and layers,
+    // and the arena grows (a GPU copy of the old layers) several times while meshes are in use.
+    let opts = HeadlessOptions {
+        arena: ArenaOptions {
+            items_per_row: Some(3),
+            rows_per_layer: Some(4),
+        },
+        ..Default::default()
     };
-    let split = ctx.upload_with(&t, &opts).unwrap();
-    assert!(split.node_layout().layers > 1 && split.triangle_layout().layers > 1);
-    assert!(split.node_layout().rows_per_layer == 8);
-    let whole = ctx.upload(&t).unwrap();
-    let a = Body {
-        mesh: mesh.clone(),
-        gpu: split,
+    let ctx = match GpuContext::headless_with(&opts) {
+        Ok(c) => c,
+        Err(e) => {
+            assert!(
+                !require_gpu(),
+                "FRCD_REQUIRE_GPU=1 but no usable adapter: {e}"
+            );
+            println!("SKIP: {e}");
+            return;
+        }
     };
-    let b = Body { mesh, gpu: whole };
+    let first = body(&ctx, shapes::icosphere(1.0, 2));
     let poses: Vec<(Pose, Pose)> = (0..4)
         .map(|k| {
             (
@@ -332,8 +339,113 @@ fn meshes_split_across_rows_and_layers() {
             )
         })
         .collect();
-    let (pairs, _) = agree(ctx, &a, &b, &poses, &mut QueryScratch::default(), true);
-    assert!(pairs > 0);
+    let mut scratch = QueryScratch::default();
+    let (before, _) = agree(&ctx, &first, &first, &poses, &mut scratch, true);
+    assert!(before > 0);
+    // Larger meshes force growth; the first mesh stays valid across it.
+    let second = body(&ctx, shapes::icosphere(1.0, 3));
+    let third = body(&ctx, shapes::torus(0.8, 0.25, 48, 16).expect("torus"));
+    assert_eq!(
+        agree(&ctx, &first, &first, &poses, &mut scratch, true).0,
+        before
+    );
+    assert!(agree(&ctx, &second, &third, &poses, &mut scratch, true).0 > 0);
+    assert!(agree(&ctx, &first, &second, &poses, &mut scratch, true).0 > 0);
+}
+
+/// Issue 10 item 2: every body pair of a frame in one dispatch chain, one submission and one
+/// readback; each answer equal to the oracle's for its pair.
+#[test]
+fn a_frame_of_many_pairs_is_one_submission() {
+    let Some(ctx) = new_context() else { return };
+    let meshes = [
+        shapes::icosphere(1.0, 2),
+        shapes::torus(0.8, 0.25, 32, 12).expect("torus"),
+        shapes::cuboid(DVec3::new(0.9, 0.4, 0.2)),
+    ];
+    let bodies: Vec<Body> = meshes.iter().map(|m| body(&ctx, m.clone())).collect();
+    let mut rng = StdRng::seed_from_u64(99);
+    let poses: Vec<Pose> = (0..24)
+        .map(|_| {
+            let axis = DVec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            )
+            .normalize_or(DVec3::Z);
+            Pose::new(
+                DVec3::new(
+                    rng.random_range(-1.5..1.5),
+                    rng.random_range(-1.5..1.5),
+                    rng.random_range(-0.5..0.5),
+                ),
+                DQuat::from_axis_angle(axis, rng.random_range(0.0..6.0)),
+            )
+        })
+        .collect();
+    let items: Vec<(usize, usize, usize, usize)> = (0..40)
+        .map(|k| (k % 3, (k * 7) % 24, (k / 3) % 3, (k * 5 + 3) % 24))
+        .collect();
+    let batch: Vec<_> = items
+        .iter()
+        .map(|&(a, pa, b, pb)| (&bodies[a].gpu, &poses[pa], &bodies[b].gpu, &poses[pb]))
+        .collect();
+    let mut scratch = QueryScratch::with_capacity(4, 4);
+    // Tiny buffers first: the overflow re-run covers the whole batch.
+    let got = ctx.collide_batch(&batch, &mut scratch).unwrap();
+    assert!(got.reruns > 0);
+    let (s0, r0) = (ctx.submissions(), ctx.readbacks());
+    let again = ctx.collide_batch(&batch, &mut scratch).unwrap();
+    assert_eq!((ctx.submissions() - s0, ctx.readbacks() - r0), (1, 1));
+    assert_eq!(
+        (again.submissions, again.readbacks, again.reruns),
+        (1, 1, 0)
+    );
+    let mut touching = 0;
+    for (k, &(a, pa, b, pb)) in items.iter().enumerate() {
+        let want = oracle::pairs(&bodies[a].mesh, &poses[pa], &bodies[b].mesh, &poses[pb]);
+        assert_eq!(got.results[k].pairs, want, "pair {k}");
+        assert_eq!(again.results[k].pairs, want, "pair {k}");
+        touching += usize::from(!want.is_empty());
+    }
+    assert!(touching > 5 && touching < items.len(), "{touching}");
+    assert!(
+        ctx.collide_batch(&[], &mut scratch)
+            .unwrap()
+            .results
+            .is_empty()
+    );
+}
+
+/// Issue 10 item 3: recorded into the caller's encoder, submitted by the caller, resolved by
+/// waiting on that submission only.
+#[test]
+fn a_batch_recorded_into_the_callers_encoder() {
+    let Some(ctx) = new_context() else { return };
+    let a = body(&ctx, shapes::icosphere(1.0, 3));
+    let poses: Vec<Pose> = (0..6)
+        .map(|k| Pose::from_translation(DVec3::new(0.35 * k as f64, 0.1, 0.0)))
+        .collect();
+    let batch: Vec<_> = (0..5)
+        .map(|k| (&a.gpu, &poses[0], &a.gpu, &poses[k + 1]))
+        .collect();
+    for caps in [(1 << 14, 1 << 12), (2, 2)] {
+        let mut scratch = QueryScratch::with_capacity(caps.0, caps.1);
+        let mut enc = ctx
+            .device()
+            .create_command_encoder(&frcd_gpgpu::wgpu::CommandEncoderDescriptor::default());
+        let s0 = ctx.submissions();
+        let pending = ctx.encode_batch(&mut enc, &batch, &mut scratch).unwrap();
+        // The engine's own frame work would be recorded here too.
+        let index = ctx.queue().submit([enc.finish()]);
+        let got = pending.resolve(index).unwrap();
+        assert_eq!(ctx.submissions() - s0, got.reruns as u64);
+        assert_eq!(got.submissions, got.reruns);
+        for (k, r) in got.results.iter().enumerate() {
+            let want = oracle::pairs(&a.mesh, &poses[0], &a.mesh, &poses[k + 1]);
+            assert_eq!(r.pairs, want, "caps {caps:?} pair {k}");
+        }
+    }
 }
 
 #[test]
@@ -520,16 +632,28 @@ fn callers_device_is_used_and_its_limits_checked() {
 
 #[test]
 fn meshes_that_do_not_fit_are_a_typed_error() {
-    let Some(ctx) = shared() else { return };
-    let t = tree(&shapes::icosphere(1.0, 1));
-    let narrow = UploadOptions {
-        max_texture_width: Some(4),
-        max_texture_rows: None,
+    // One item per row and per layer: a 5,120-triangle mesh needs more layers than a device
+    // offers (2,048 on lavapipe, 256 in WebGPU): a typed error, not a panic.
+    let opts = HeadlessOptions {
+        arena: ArenaOptions {
+            items_per_row: Some(1),
+            rows_per_layer: Some(1),
+        },
+        ..Default::default()
     };
-    assert!(matches!(
-        ctx.upload_with(&t, &narrow),
-        Err(GpuError::MeshTooLarge { .. })
-    ));
+    let Ok(ctx) = GpuContext::headless_with(&opts) else {
+        assert!(!require_gpu());
+        return;
+    };
+    let big = 1 + ctx.limits().max_texture_array_layers as usize;
+    let mut sub = 0;
+    while 20 * 4usize.pow(sub) < big {
+        sub += 1;
+    }
+    let t = tree(&shapes::icosphere(1.0, sub));
+    assert!(matches!(ctx.upload(&t), Err(GpuError::MeshTooLarge { .. })));
+    // The context still works for meshes that fit.
+    ctx.upload(&tree(&shapes::icosphere(1.0, 0))).unwrap();
 }
 
 #[test]
@@ -565,5 +689,66 @@ fn meshes_far_from_their_local_origin() {
             .collect();
         let (pairs, _) = agree(ctx, &a, &b, &poses, &mut QueryScratch::default(), false);
         assert!(pairs > 50, "{pairs}");
+    }
+}
+
+/// Issue 11: on every wgpu backend present (Vulkan and GL here, whichever the machine has),
+/// the context is either refused with a typed error at creation or answers exactly like the
+/// oracle: never a wrong answer. GL's one-layer textures once read back as zeros (0 pairs).
+#[test]
+fn every_backend_is_correct_or_refused_at_creation() {
+    let mut ran = Vec::new();
+    for (name, backends) in [
+        ("vulkan", frcd_gpgpu::wgpu::Backends::VULKAN),
+        ("gl", frcd_gpgpu::wgpu::Backends::GL),
+    ] {
+        let opts = frcd_gpgpu::HeadlessOptions {
+            backends: Some(backends),
+            ..Default::default()
+        };
+        let ctx = match GpuContext::headless_with(&opts) {
+            Ok(c) => c,
+            Err(e @ GpuError::NoAdapter(_)) => {
+                println!("SKIP backend {name}: {e}");
+                continue;
+            }
+            Err(e @ (GpuError::Unsupported { .. } | GpuError::Pipeline { .. })) => {
+                println!("backend {name} refused at creation (typed): {e}");
+                continue;
+            }
+            Err(e) => panic!("backend {name}: unexpected error at creation: {e}"),
+        };
+        println!("backend {name}: {:?}", ctx.adapter_info());
+        let a = body(&ctx, shapes::icosphere(1.0, 3));
+        let b = body(&ctx, shapes::torus(0.8, 0.25, 32, 12).expect("torus"));
+        let poses: Vec<(Pose, Pose)> = (0..5)
+            .map(|k| {
+                (
+                    Pose::from_translation(DVec3::new(3e3, -1e3, 7.0)),
+                    Pose::new(
+                        DVec3::new(3e3 + 0.35 * k as f64 - 0.7, -1e3 + 0.1, 7.0),
+                        DQuat::from_rotation_x(0.4 * k as f64),
+                    ),
+                )
+            })
+            .collect();
+        // Tiny buffers: the overflow re-run path runs on this backend too.
+        let mut scratch = QueryScratch::with_capacity(4, 4);
+        let (pairs, _) = agree(&ctx, &a, &b, &poses, &mut scratch, false);
+        assert!(pairs > 0, "backend {name}: the sweep must touch");
+        let boxes: Vec<Aabb> = (0..150)
+            .map(|i| {
+                let c = DVec3::new((i % 10) as f64, ((i / 10) % 5) as f64, (i / 50) as f64);
+                Aabb::new(c, c + DVec3::splat(0.6 + 0.5 * ((i % 3) as f64)))
+            })
+            .collect();
+        let got = ctx
+            .overlapping_bodies(&boxes, &mut BoxScratch::default())
+            .unwrap();
+        assert_eq!(got.pairs, cpu_box_pairs(&boxes), "backend {name}: box pass");
+        ran.push(name);
+    }
+    if require_gpu() {
+        assert!(!ran.is_empty(), "FRCD_REQUIRE_GPU=1 but no backend ran");
     }
 }

@@ -1,9 +1,11 @@
-//! CPU-only: every WGSL file in shaders/gpgpu parses and validates with naga, and the crate
+//! CPU-only: every WGSL file in crates/frcd-gpgpu/shaders parses and validates with naga, and the crate
 //! embeds each of them.
 
 use std::path::PathBuf;
 
 fn validate(name: &str, src: &str) {
+    // Every file is compiled with frcd-gpu's prelude in front (the shared structs).
+    let src = &frcd_gpu::with_prelude(src);
     let module = naga::front::wgsl::parse_str(src)
         .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
     naga::valid::Validator::new(
@@ -16,9 +18,9 @@ fn validate(name: &str, src: &str) {
 
 #[test]
 fn every_wgsl_file_validates_with_naga() {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shaders/gpgpu");
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("shaders");
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .expect("shaders/gpgpu exists")
+        .expect("crates/frcd-gpgpu/shaders exists")
         .map(|e| e.expect("readable entry").path())
         .filter(|p| p.extension().is_some_and(|e| e == "wgsl"))
         .collect();

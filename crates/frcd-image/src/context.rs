@@ -72,6 +72,13 @@ impl GpuContext {
         }))
         .map_err(|e| ImageError::NoAdapter(e.to_string()))?;
         let info = adapter.get_info();
+        if info.backend == wgpu::Backend::Gl {
+            return Err(ImageError::UnsupportedBackend {
+                adapter: info.name,
+                backend: info.backend,
+                reason: "GLSL cannot textureLoad a depth texture nor read its stencil aspect",
+            });
+        }
         let missing = Self::required_features() - adapter.features();
         if !missing.is_empty() {
             return Err(ImageError::MissingFeatures { missing });
@@ -111,6 +118,14 @@ impl GpuContext {
     }
 
     fn check(device: &wgpu::Device) -> Result<(), ImageError> {
+        let info = device.adapter_info();
+        if info.backend == wgpu::Backend::Gl {
+            return Err(ImageError::UnsupportedBackend {
+                adapter: info.name,
+                backend: info.backend,
+                reason: "GLSL cannot textureLoad a depth texture nor read its stencil aspect",
+            });
+        }
         let missing = Self::required_features() - device.features();
         if !missing.is_empty() {
             return Err(ImageError::MissingFeatures { missing });

@@ -170,11 +170,25 @@ pub struct ImageResult {
     pub colliding_set: Option<CollidingSet>,
 }
 
-/// Caller-owned per-query GPU state (textures and buffers sized to the last image). Reused across
-/// queries of the same size; create one per thread with [`ImageScratch::default`].
+/// Caller-owned per-query GPU state: square targets and buffers of the largest resolution used
+/// so far, allocated once and reused by every query that fits (whatever the overlap's aspect
+/// ratio); create one per thread with [`ImageScratch::default`].
 #[derive(Debug, Default)]
 pub struct ImageScratch {
     inner: Option<Scratch>,
+    allocations: u32,
+}
+
+impl ImageScratch {
+    /// Size `(width, height)` in pixels of the targets held now (`None` before the first query).
+    pub fn capacity(&self) -> Option<(u32, u32)> {
+        self.inner.as_ref().map(|s| (s.width, s.height))
+    }
+
+    /// How many times targets were allocated (once per larger resolution).
+    pub fn allocations(&self) -> u32 {
+        self.allocations
+    }
 }
 
 #[derive(Debug)]
@@ -219,23 +233,11 @@ pub struct ImageDetector {
 }
 
 /// The WGSL sources of the detector (also validated by a CPU-only naga test).
-pub const RASTER_WGSL: &str = include_str!("../../../shaders/image/raster.wgsl");
+pub const RASTER_WGSL: &str = include_str!("../shaders/raster.wgsl");
 /// The resolve compute shader.
-pub const RESOLVE_WGSL: &str = include_str!("../../../shaders/image/resolve.wgsl");
+pub const RESOLVE_WGSL: &str = include_str!("../shaders/resolve.wgsl");
 
-/// The driver's full description of a wgpu error (its `Display` is only the kind).
-fn describe(e: &wgpu::Error) -> String {
-    match e {
-        wgpu::Error::Validation { description, .. } | wgpu::Error::Internal { description, .. } => {
-            description.clone()
-        }
-        other => other.to_string(),
-    }
-}
-
-fn gpu_err(stage: &'static str) -> impl Fn(String) -> ImageError {
-    move |message| ImageError::Gpu { stage, message }
-}
+use frcd_gpu::describe;
 
 impl ImageDetector {
     /// Builds the pipelines on `ctx`'s device.
@@ -247,11 +249,11 @@ impl ImageDetector {
         let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
         let raster = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("frcd-image raster"),
-            source: wgpu::ShaderSource::Wgsl(RASTER_WGSL.into()),
+            source: wgpu::ShaderSource::Wgsl(frcd_gpu::with_prelude(RASTER_WGSL).into()),
         });
         let resolve_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("frcd-image resolve"),
-            source: wgpu::ShaderSource::Wgsl(RESOLVE_WGSL.into()),
+            source: wgpu::ShaderSource::Wgsl(frcd_gpu::with_prelude(RESOLVE_WGSL).into()),
         });
         let draw_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("frcd-image draw"),
@@ -637,10 +639,15 @@ impl ImageDetector {
         }
     }
 
-    fn scratch<'s>(&self, scratch: &'s mut ImageScratch, w: u32, h: u32) -> &'s Scratch {
-        let fits = matches!(&scratch.inner, Some(s) if s.detector == self.id && s.width == w && s.height == h);
+    /// The scratch's targets are square, `side` pixels (the query's resolution) or more, and
+    /// are kept for every later image that fits: a query renders into the `w × h` corner
+    /// (viewport and scissor), so a changing overlap aspect ratio reallocates nothing.
+    fn scratch<'s>(&self, scratch: &'s mut ImageScratch, w: u32, h: u32, side: u32) -> &'s Scratch {
+        let fits = matches!(&scratch.inner, Some(s) if s.detector == self.id && s.width >= w && s.height >= h);
         if !fits {
-            scratch.inner = Some(self.make_scratch(w, h));
+            let side = side.max(w).max(h);
+            scratch.inner = Some(self.make_scratch(side, side));
+            scratch.allocations += 1;
         }
         scratch.inner.as_ref().expect("just made")
     }
@@ -827,7 +834,7 @@ impl ImageDetector {
         options: &ImageOptions,
     ) -> Result<(Vec<f32>, Vec<u32>, [u32; 2]), ImageError> {
         let (w, h) = (view.width, view.height);
-        let s = self.scratch(scratch, w, h);
+        let s = self.scratch(scratch, w, h, options.resolution);
         let device = self.ctx.device();
         let queue = self.ctx.queue();
         let mats = [
@@ -838,17 +845,17 @@ impl ImageDetector {
             queue.write_buffer(buf, 0, bytemuck::cast_slice(m));
         }
         let region_depth = view.depth_of(view.region.min[view.axis]);
-        let params: [u32; 8] = [
-            w,
-            h,
-            ENTERING_CODE,
-            0,
-            (region_depth as f32).to_bits(),
-            ((view.far - view.near) as f32).to_bits(),
-            0,
-            0,
-        ];
-        queue.write_buffer(&s.params, 0, bytemuck::cast_slice(&params));
+        let params = frcd_gpu::layout::ResolveParams {
+            width: w,
+            height: h,
+            entering_code: ENTERING_CODE,
+            _pad0: 0,
+            depth_ref: region_depth as f32,
+            depth_scale: (view.far - view.near) as f32,
+            _pad1: 0.0,
+            _pad2: 0.0,
+        };
+        queue.write_buffer(&s.params, 0, bytemuck::bytes_of(&params));
         // The first layer peels from just in front of the region: fragments of X in front of it
         // cannot be in A ∩ B (it lies inside both boxes); Y's faces there still count for parity.
         let start_depth = (region_depth - 2f64.powi(-16)).max(0.0) as f32;
@@ -918,6 +925,8 @@ impl ImageDetector {
                         occlusion_query_set: None,
                         multiview_mask: None,
                     });
+                    pass.set_viewport(0.0, 0.0, w as f32, h as f32, 0.0, 1.0);
+                    pass.set_scissor_rect(0, 0, w, h);
                     // Peel: the nearest surface of X strictly behind the previous layer.
                     pass.set_pipeline(&self.peel);
                     pass.set_bind_group(0, &s.draw_bg[c], &[]);
@@ -940,9 +949,10 @@ impl ImageDetector {
                 }
                 enc.copy_buffer_to_buffer(&chain.counters, 0, &s.counter_readback, c as u64 * 8, 8);
             }
-            queue.submit([enc.finish()]);
+            let index = queue.submit([enc.finish()]);
             let counts: Vec<u32> =
-                bytemuck::cast_slice(&read_buffer(device, &s.counter_readback, 16)?).to_vec();
+                bytemuck::cast_slice(&read_buffer(device, &s.counter_readback, 16, index)?)
+                    .to_vec();
             for c in 0..2 {
                 if active[c] {
                     if counts[2 * c] == 0 {
@@ -966,8 +976,8 @@ impl ImageDetector {
         let bytes = w as u64 * h as u64 * 4;
         enc.copy_buffer_to_buffer(&s.lengths, 0, &s.readback, 0, bytes);
         enc.copy_buffer_to_buffer(&s.mask, 0, &s.readback, bytes, bytes);
-        queue.submit([enc.finish()]);
-        let raw = read_buffer(device, &s.readback, bytes * 2)?;
+        let index = queue.submit([enc.finish()]);
+        let raw = read_buffer(device, &s.readback, bytes * 2, index)?;
         let lengths: Vec<f32> = bytemuck::pod_collect_to_vec(&raw[..bytes as usize]);
         let mask: Vec<u32> = bytemuck::pod_collect_to_vec(&raw[bytes as usize..]);
         Ok((lengths, mask, layers))
@@ -988,29 +998,26 @@ pub fn check_solid(name: &str, mesh: &TriMesh) -> Result<(), ImageError> {
     }
 }
 
-/// Maps `size` bytes of `buffer`, copies them out and unmaps.
+/// Maps `size` bytes of `buffer` after submission `index`, waiting for that submission only
+/// (not for an engine's other work on the device).
 fn read_buffer(
     device: &wgpu::Device,
     buffer: &wgpu::Buffer,
     size: u64,
+    index: wgpu::SubmissionIndex,
 ) -> Result<Vec<u8>, ImageError> {
-    let slice = buffer.slice(..size);
-    let (tx, rx) = std::sync::mpsc::channel();
-    slice.map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| gpu_err("poll")(e.to_string()))?;
-    rx.recv()
-        .map_err(|e| gpu_err("readback")(e.to_string()))?
-        .map_err(|e| gpu_err("readback")(e.to_string()))?;
-    let out = slice
-        .get_mapped_range()
-        .map_err(|e| gpu_err("readback")(e.to_string()))?
-        .to_vec();
-    buffer.unmap();
-    Ok(out)
+    frcd_gpu::read_back(device, buffer, size, index).map_err(|e| {
+        let mut message = e.to_string();
+        let mut src = std::error::Error::source(&e);
+        while let Some(s) = src {
+            message.push_str(&format!(": {s}"));
+            src = s.source();
+        }
+        ImageError::Gpu {
+            stage: "readback",
+            message,
+        }
+    })
 }
 
 /// Σ over pixels of `area · ½ · max |ℓ_i − ℓ_j|` over 4-neighbours j (outside the image counts

@@ -11,6 +11,7 @@ pub enum Which {
 
 /// Everything the image-space detector can refuse or fail at. Each variant names what and where.
 #[derive(Clone, Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum ImageError {
     /// No GPU adapter (not even a software one such as Mesa's lavapipe) could be found.
     #[error("no GPU adapter available: {0}")]
@@ -38,6 +39,21 @@ pub enum ImageError {
         have: u64,
         /// The needed value.
         need: u64,
+    },
+    /// The device runs on a wgpu backend the detector cannot run on correctly. wgpu's GL
+    /// backend translates WGSL to GLSL, which cannot `textureLoad` a depth texture or read the
+    /// stencil aspect as an integer texture (the depth peeling and the parity resolve need
+    /// both): refused here, at context creation, rather than failing or answering wrongly later.
+    #[error(
+        "adapter '{adapter}' uses the {backend:?} backend, which the image detector cannot use: {reason}"
+    )]
+    UnsupportedBackend {
+        /// Adapter name.
+        adapter: String,
+        /// The backend.
+        backend: wgpu::Backend,
+        /// Why.
+        reason: &'static str,
     },
     /// A mesh is not a closed, consistently oriented 2-manifold; ray parity needs one.
     #[error(

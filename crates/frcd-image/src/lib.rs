@@ -112,12 +112,17 @@ mod view;
 pub use context::GpuContext;
 pub use detector::{
     CollidingSet, ErrorBounds, GpuMesh, ImageDetector, ImageOptions, ImageResult, ImageScratch,
-    PixelImage, RASTER_WGSL, RESOLVE_WGSL, check_solid,
+    PixelImage, check_solid,
 };
+#[doc(hidden)]
+pub use detector::{RASTER_WGSL, RESOLVE_WGSL};
 pub use error::{ImageError, Which};
 pub use view::{View, ViewAxis};
+/// The wgpu this crate is built on (to create a device for [`GpuContext::from_device`]).
+pub use wgpu;
 
 /// Every WGSL source of this crate, by file name (for validation and tooling).
+#[doc(hidden)]
 pub const SHADERS: &[(&str, &str)] =
     &[("raster.wgsl", RASTER_WGSL), ("resolve.wgsl", RESOLVE_WGSL)];
 

@@ -17,6 +17,12 @@ fn detector() -> Option<&'static ImageDetector> {
                 eprintln!("frcd-image tests on {}", d.context().adapter_name());
                 Some(d)
             }
+            // A backend the detector cannot use (GL) is refused at creation, by design: the
+            // refusal itself is what `gl_is_refused_at_context_creation` checks.
+            Err(e @ ImageError::UnsupportedBackend { .. }) => {
+                eprintln!("SKIP frcd-image GPU tests (refused, typed): {e}");
+                None
+            }
             Err(e) if !required => {
                 eprintln!("SKIP frcd-image GPU tests: {e}");
                 None
@@ -588,4 +594,86 @@ fn disjoint_boxes_answer_without_gpu_work_and_errors_are_typed() {
             Err(ImageError::NotSolid { .. })
         ));
     });
+}
+
+/// Issue 11: wgpu's GL backend cannot run the detector (GLSL has no depth `textureLoad`); it is
+/// refused with a typed error when the context is made, never later and never with an answer.
+/// Vulkan (lavapipe here) is accepted. Runs on whichever of the two the machine has.
+#[test]
+fn gl_is_refused_at_context_creation() {
+    for backends in [wgpu::Backends::GL, wgpu::Backends::VULKAN] {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = backends;
+        match frcd_image::GpuContext::headless_with(desc) {
+            Err(ImageError::NoAdapter(e)) => println!("SKIP {backends:?}: {e}"),
+            Err(ImageError::UnsupportedBackend { backend, .. }) => {
+                assert_eq!(backend, wgpu::Backend::Gl);
+                assert_eq!(backends, wgpu::Backends::GL);
+            }
+            Err(e) => panic!("{backends:?}: unexpected error {e}"),
+            Ok(ctx) => {
+                assert_ne!(backends, wgpu::Backends::GL, "GL must be refused");
+                // And it works: a real query on the accepted backend.
+                let det = ImageDetector::new(ctx).expect("pipelines");
+                let a = det.upload("a", &shapes::cuboid(DVec3::splat(0.5))).unwrap();
+                let r = det
+                    .query(
+                        &mut ImageScratch::default(),
+                        &a,
+                        &Pose::IDENTITY,
+                        &a,
+                        &Pose::from_translation(DVec3::new(0.5, 0.1, 0.0)),
+                        &opts(64),
+                    )
+                    .unwrap();
+                assert!(
+                    r.collide && r.volume > 0.3 && r.volume < 0.7,
+                    "{}",
+                    r.volume
+                );
+            }
+        }
+    }
+}
+
+/// Issue 10 item 3: targets allocated once per resolution, whatever the overlap's aspect ratio
+/// (it changes with every pose), and the answers stay right in the reused targets.
+#[test]
+fn targets_are_allocated_once_per_resolution() {
+    with_gpu(
+        "targets_are_allocated_once_per_resolution",
+        |det, scratch| {
+            let a = det
+                .upload("a", &shapes::cuboid(DVec3::new(1.0, 0.5, 0.25)))
+                .unwrap();
+            let b = det.upload("b", &shapes::cuboid(DVec3::splat(0.5))).unwrap();
+            let mut volumes = Vec::new();
+            for (k, dx) in [0.2, 0.9, 1.3, 0.5, 1.1].into_iter().enumerate() {
+                let pb = Pose::new(DVec3::new(dx, 0.3 * k as f64 / 4.0, 0.1), DQuat::IDENTITY);
+                let r = det
+                    .query(scratch, &a, &Pose::IDENTITY, &b, &pb, &opts(128))
+                    .unwrap();
+                let view = r.view.expect("boxes overlap");
+                assert!(view.width <= 128 && view.height <= 128);
+                // Exact overlap volume of two axis-aligned boxes.
+                let ov =
+                    |lo1: f64, hi1: f64, lo2: f64, hi2: f64| (hi1.min(hi2) - lo1.max(lo2)).max(0.0);
+                let want = ov(-1.0, 1.0, dx - 0.5, dx + 0.5)
+                    * ov(-0.5, 0.5, pb.translation.y - 0.5, pb.translation.y + 0.5)
+                    * ov(-0.25, 0.25, -0.4, 0.6);
+                assert!(
+                    (r.volume - want).abs() <= 0.03 * want + 1e-3,
+                    "{k}: {} vs {want}",
+                    r.volume
+                );
+                volumes.push((view.width, view.height));
+            }
+            assert!(
+                volumes.windows(2).any(|w| w[0] != w[1]),
+                "aspect ratios must vary: {volumes:?}"
+            );
+            assert_eq!(scratch.allocations(), 1);
+            assert_eq!(scratch.capacity(), Some((128, 128)));
+        },
+    );
 }

@@ -1,23 +1,25 @@
-//! CPU-only: every shaders/image/*.wgsl parses and validates with naga, and the crate embeds
+//! CPU-only: every crates/frcd-image/shaders/*.wgsl parses and validates with naga, and the crate embeds
 //! every one of them.
 
 use std::path::PathBuf;
 
 fn shader_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shaders/image")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("shaders")
 }
 
 #[test]
 fn every_wgsl_file_validates_with_naga() {
     let mut files: Vec<PathBuf> = std::fs::read_dir(shader_dir())
-        .expect("shaders/image exists")
+        .expect("crates/frcd-image/shaders exists")
         .map(|e| e.unwrap().path())
         .filter(|p| p.extension().is_some_and(|e| e == "wgsl"))
         .collect();
     files.sort();
     assert!(!files.is_empty(), "no WGSL files found");
     for path in &files {
-        let src = std::fs::read_to_string(path).unwrap();
+        let file = std::fs::read_to_string(path).unwrap();
+        // Compiled with frcd-gpu's prelude in front (the shared structs).
+        let src = frcd_gpu::with_prelude(&file);
         let module = naga::front::wgsl::parse_str(&src)
             .unwrap_or_else(|e| panic!("{}: {}", path.display(), e.emit_to_string(&src)));
         naga::valid::Validator::new(

@@ -11,26 +11,16 @@
 
 const UNCERTAIN_FLAG: u32 = 0x80000000u;
 
-struct Box {
-    lo_dn: vec4<f32>,
-    hi_up: vec4<f32>,
-    lo_up: vec4<f32>,
-    hi_dn: vec4<f32>,
-}
+// BodyBox and BoxParams come from the prelude (frcd-gpu).
 
-struct Params {
-    // body count, output capacity, unused, unused
-    n: vec4<u32>,
-}
-
-@group(0) @binding(0) var<storage, read> boxes: array<Box>;
+@group(0) @binding(0) var<storage, read> boxes: array<BodyBox>;
 @group(0) @binding(1) var<storage, read_write> out_pairs: array<vec2<u32>>;
 @group(0) @binding(2) var<storage, read_write> count: atomic<u32>;
-@group(0) @binding(3) var<uniform> params: Params;
+@group(0) @binding(3) var<uniform> params: BoxParams;
 
 const TILE: u32 = 64u;
 
-var<workgroup> tile: array<Box, 64>;
+var<workgroup> tile: array<BodyBox, 64>;
 
 fn meet(alo: vec3<f32>, ahi: vec3<f32>, blo: vec3<f32>, bhi: vec3<f32>) -> bool {
     return all(alo <= bhi) && all(blo <= ahi);

@@ -6,21 +6,9 @@
 // entering face (the ray enters X there) starts an interval of X ∩ Y, a leaving face ends one.
 // Summed over every layer of both meshes this is the exact length of the ray inside X ∩ Y.
 
-struct Params {
-    width: u32,
-    height: u32,
-    // Facing code written by fs_peel for faces where the view ray enters the solid.
-    entering_code: u32,
-    _pad0: u32,
-    // Depth of the overlap region's near face; lengths are measured from it to keep f32 small.
-    depth_ref: f32,
-    // World length of the whole depth range [0, 1].
-    depth_scale: f32,
-    _pad1: f32,
-    _pad2: f32,
-};
+// ResolveParams comes from the prelude (frcd-gpu).
 
-@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(0) var<uniform> params: ResolveParams;
 @group(0) @binding(1) var layer_depth: texture_depth_2d;
 @group(0) @binding(2) var layer_stencil: texture_2d<u32>;
 @group(0) @binding(3) var layer_facing: texture_2d<u32>;

@@ -9,11 +9,7 @@
 //   parity of the other mesh's faces in front of the layer, i.e. 1 iff the layer's surface
 //   point is inside the other solid (Knott & Pai's CInDeR "virtual ray casting").
 
-struct Draw {
-    // Maps a vertex (f32, relative to its mesh's centre) to clip space; composed in f64 on the
-    // CPU relative to the overlap region's centre so the f32 entries stay small.
-    clip_from_local: mat4x4<f32>,
-};
+// Draw comes from the prelude (frcd-gpu).
 
 @group(0) @binding(0) var<uniform> draw: Draw;
 // Depth of the previous peeled layer (or of the overlap region's near face for the first layer).

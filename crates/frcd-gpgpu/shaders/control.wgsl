@@ -1,0 +1,58 @@
+// frcd-gpgpu: single-invocation control passes of the breadth-first traversal.
+//
+// `init` starts a batch: the CPU wrote the root pair of every body pair into frontier 0.
+// `prepare` runs after each traversal level: it turns the next frontier's size into the
+// indirect dispatch arguments of the following level, records overflow (a frontier larger than
+// its buffer), and resets the append counter. Both run inside the query's one submission.
+
+const WG: u32 = 64u;
+
+// State and Params come from the prelude (frcd-gpu).
+
+@group(0) @binding(0) var<storage, read_write> state: State;
+@group(0) @binding(1) var<storage, read_write> args: array<u32, 3>;
+@group(0) @binding(2) var<uniform> params: Params;
+
+// Indirect arguments for `m` frontier entries: ceil(m / WG) workgroups as an x × y grid.
+fn set_args(m: u32) {
+    let groups = (m + WG - 1u) / WG;
+    let x = min(groups, params.caps.z);
+    var y = 0u;
+    if x > 0u {
+        y = (groups + x - 1u) / x;
+    }
+    args[0] = x;
+    args[1] = y;
+    args[2] = 1u;
+}
+
+// The CPU wrote the batch's root pairs (k, 0, 0) into frontier 0 (at most its capacity).
+@compute @workgroup_size(1)
+fn init() {
+    let n = params.caps.w;
+    let m = min(n, params.caps.x);
+    state.cur = m;
+    atomicStore(&state.next, 0u);
+    atomicStore(&state.out, 0u);
+    state.needed = n;
+    state.levels = 0u;
+    state.pairs_tested = 0u;
+    set_args(m);
+}
+
+@compute @workgroup_size(1)
+fn prepare() {
+    // The level just run tested `cur` entries.
+    if state.cur > 0u {
+        state.levels += 1u;
+        state.pairs_tested += state.cur;
+    }
+    let n = atomicLoad(&state.next);
+    atomicStore(&state.next, 0u);
+    state.needed = max(state.needed, n);
+    // On overflow only the first `cap` entries were written; run those (the answer is discarded
+    // and the batch re-run with a larger frontier, but `needed` keeps growing meanwhile).
+    let m = min(n, params.caps.x);
+    state.cur = m;
+    set_args(m);
+}

@@ -1,0 +1,362 @@
+// frcd-gpgpu: one level of the breadth-first traversal of the pair trees of a whole batch of
+// body pairs (one frame: every candidate pair in one dispatch chain).
+//
+// Each invocation takes one (pair, node of A, node of B) entry from the current frontier and runs
+// the separating-axis test in f32 with a computed error bound, so rounding can only keep a pair,
+// never drop one. Overlapping internal pairs append their child pairs to the next frontier
+// (atomic compaction); overlapping leaf pairs run the triangle test (Guigue-Devillers orientation
+// form) and append the triangle pair, flagged "uncertain" when a sign it needs is within the
+// bound of zero.
+//
+// Everything is computed in A's local frame: B's geometry is mapped by the pair's relative pose
+// (R, t). Every mesh of a context lives in one pair of arena textures (rgba32float, one texel =
+// 4 floats), each tree in its own local frame, at the item offsets of its pair entry:
+//   node i: 5 texels  (c.xyz, 0) (a0.xyz, h0) (a1.xyz, h1) (a2.xyz, h2) (right, first, count, 0)
+//   triangle j (leaf order): 3 texels (v0.xyz, mesh index) (v1.xyz, 0) (v2.xyz, 0)
+// Node and triangle indices inside an item are relative to the mesh's base; item i lives at
+// row-major slot i of (layer, row, column group); see `load`.
+
+const WG: u32 = 64u;
+
+// ---- Floating-point model (WGSL, not IEEE) ----
+//
+// WGSL lets an implementation (1) round each f32 operation either way: the result is one of
+// the two f32 neighbours of the exact value, error < 1 ulp <= 2^-23 relative; (2) contract
+// a * b + c into one fused multiply-add (one rounding instead of two); (3) flush subnormal
+// inputs and results to zero (absolute error < 2^-126 per operation); (4) assume finite math.
+// The bounds below hold under every combination:
+// - U = 2^-23 is the relative error of one operation (either rounding direction). The
+//   forward bounds used are of the form "|computed - exact| <= gamma_k * (sum of |terms|)",
+//   gamma_k = k U / (1 - k U); a fused multiply-add skips a rounding, and every such bound
+//   stays valid with fewer roundings (it is a bound on the product of (1 + delta_i) factors).
+// - TAU = 2^-126 bounds the absolute error a flush adds to one operation. Every bound adds
+//   a TAU term scaled by what the flushed value is later multiplied by, written so that it
+//   is never itself below the normal range (64 TAU * (1 + x)^k >= 2^-120).
+// - Finite math: the CPU refuses inputs whose magnitude could overflow any quantity here
+//   (coordinates, extents and translations above 2^36, see `pack::MAX_MAGNITUDE`), so no
+//   NaN or infinity is ever produced and no comparison relies on their semantics.
+// - Every bound is evaluated in f32 itself, from non-negative terms only (at most ~10
+//   roundings, relative error < 12 U), and multiplied by 1.01, which covers that.
+// - GPU "touching" answers are not trusted at all: the CPU re-decides every pair the GPU
+//   reports with the exact test (cheap next to the readback), so these bounds only have to
+//   make "disjoint" / "separated" decisions safe: rounding can then only add candidates.
+// `emulate.rs` (a test module of the crate) runs this arithmetic on the CPU with every
+// rounding direction, with and without FMA and FTZ, and checks that no touching pair is lost.
+const U: f32 = 1.1920929e-7;
+const TAU: f32 = 1.1754944e-38;
+const UNCERTAIN_FLAG: u32 = 0x80000000u;
+
+// State, Params, Arena and PairInfo come from the prelude (frcd-gpu).
+
+@group(0) @binding(0) var nodes: texture_2d_array<f32>;
+@group(0) @binding(1) var tris: texture_2d_array<f32>;
+@group(0) @binding(2) var<uniform> arena: Arena;
+
+// Frontier entries: (pair, node of A, node of B, unused).
+@group(1) @binding(0) var<storage, read> frontier_in: array<vec4<u32>>;
+@group(1) @binding(1) var<storage, read_write> frontier_out: array<vec4<u32>>;
+@group(1) @binding(2) var<storage, read_write> state: State;
+// Output entries: (pair, triangle of A, triangle of B | UNCERTAIN_FLAG, unused).
+@group(1) @binding(3) var<storage, read_write> out_pairs: array<vec4<u32>>;
+@group(1) @binding(4) var<uniform> params: Params;
+@group(1) @binding(5) var<storage, read> pairs: array<PairInfo>;
+
+// The pair this invocation works on.
+var<private> pose: PairInfo;
+
+struct Node {
+    c: vec3<f32>,
+    a0: vec3<f32>,
+    a1: vec3<f32>,
+    a2: vec3<f32>,
+    h: vec3<f32>,
+    right: u32,
+    first: u32,
+    count: u32,
+}
+
+fn load(t: texture_2d_array<f32>, lay: vec4<u32>, per_item: u32, i: u32, k: u32) -> vec4<f32> {
+    let row_g = i / lay.x;
+    let col = (i % lay.x) * per_item + k;
+    let layer = row_g / lay.y;
+    let row = row_g % lay.y;
+    return textureLoad(t, vec2<u32>(col, row), layer, 0);
+}
+
+fn load_node(i: u32) -> Node {
+    let lay = arena.node_layout;
+    let t0 = load(nodes, lay, 5u, i, 0u);
+    let t1 = load(nodes, lay, 5u, i, 1u);
+    let t2 = load(nodes, lay, 5u, i, 2u);
+    let t3 = load(nodes, lay, 5u, i, 3u);
+    let t4 = load(nodes, lay, 5u, i, 4u);
+    var n: Node;
+    n.c = t0.xyz;
+    n.a0 = t1.xyz;
+    n.a1 = t2.xyz;
+    n.a2 = t3.xyz;
+    n.h = vec3<f32>(t1.w, t2.w, t3.w);
+    n.right = u32(t4.x);
+    n.first = u32(t4.y);
+    n.count = u32(t4.z);
+    return n;
+}
+
+fn rot(v: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(dot(pose.r0.xyz, v), dot(pose.r1.xyz, v), dot(pose.r2.xyz, v));
+}
+
+fn l1(v: vec3<f32>) -> f32 {
+    return abs(v.x) + abs(v.y) + abs(v.z);
+}
+
+fn maxabs(v: vec3<f32>) -> f32 {
+    return max(abs(v.x), max(abs(v.y), abs(v.z)));
+}
+
+// B's box mapped into A's frame.
+struct BoxB {
+    c: vec3<f32>,
+    b0: vec3<f32>,
+    b1: vec3<f32>,
+    b2: vec3<f32>,
+}
+
+// True when L separates the boxes for certain. The projection of a parallelepiped
+// {c + sum s_i h_i a_i, |s_i| <= 1} on any vector L is exactly [c.L - r, c.L + r] with
+// r = sum h_i |a_i . L|, so no orthonormality is assumed and L may be the computed (rounded)
+// cross product: the test is exact for whatever L it uses. `s` bounds (per unit of |L|_1) the
+// difference between the computed and the true centre offset and radii; 10U (ra + rb) covers
+// the rounding of the radius sums (3 products, 2 sums each: gamma_5) and of the comparison's
+// two additions; `f` is the flush-to-zero term.
+fn separated(l: vec3<f32>, tt: vec3<f32>, na: Node, bb: BoxB, hb: vec3<f32>, s: f32, f: f32) -> bool {
+    let d = abs(dot(tt, l));
+    let ra = na.h.x * abs(dot(na.a0, l)) + na.h.y * abs(dot(na.a1, l)) + na.h.z * abs(dot(na.a2, l));
+    let rb = hb.x * abs(dot(bb.b0, l)) + hb.y * abs(dot(bb.b1, l)) + hb.z * abs(dot(bb.b2, l));
+    let ll = l1(l);
+    let err = (s * ll + 10.0 * U * (ra + rb) + f * (1.0 + ll)) * 1.01;
+    return d > ra + rb + err;
+}
+
+// Conservative OBB overlap: false only when some of the 15 axes separates the boxes with margin.
+fn obb_overlap(na: Node, nb: Node) -> bool {
+    var bb: BoxB;
+    bb.b0 = rot(nb.a0);
+    bb.b1 = rot(nb.a1);
+    bb.b2 = rot(nb.a2);
+    bb.c = rot(nb.c) + pose.t.xyz;
+    let tt = bb.c - na.c;
+    // Centre error per coordinate: R and t rounded to nearest on the CPU (U/2 each), rot()'s
+    // 3-term dot plus the + t (gamma_4 on |R||c| + |t|), T's subtraction (U |tt|), then the
+    // T.L dot product (gamma_3 |tt|): <= 5U (|c|_1 + |t|_1) + 5U |tt|_1.
+    // Radius error per unit |L|_1: A's axes dotted with L (gamma_3, entries <= 1): 4U per
+    // half extent; B's rotated axes carry U/2 |b|_1 (R's rounding) + gamma_3 |b|_1 per
+    // coordinate, |b|_1 <= sqrt(3), plus their own dot with L: 10U per half extent.
+    let s = 5.0 * U * (l1(nb.c) + l1(pose.t.xyz)) + 5.0 * U * l1(tt)
+        + 4.0 * U * (na.h.x + na.h.y + na.h.z) + 10.0 * U * (nb.h.x + nb.h.y + nb.h.z);
+    // Flush to zero: each of the ~40 operations behind d, ra, rb may lose TAU, later scaled
+    // by at most max(1, |L|, h, |t|) (the bound is multiplied by (1 + |L|_1) in `separated`).
+    let f = 64.0 * TAU * (1.0 + na.h.x + na.h.y + na.h.z + nb.h.x + nb.h.y + nb.h.z + l1(tt));
+    let hb = nb.h;
+    if separated(na.a0, tt, na, bb, hb, s, f) { return false; }
+    if separated(na.a1, tt, na, bb, hb, s, f) { return false; }
+    if separated(na.a2, tt, na, bb, hb, s, f) { return false; }
+    if separated(bb.b0, tt, na, bb, hb, s, f) { return false; }
+    if separated(bb.b1, tt, na, bb, hb, s, f) { return false; }
+    if separated(bb.b2, tt, na, bb, hb, s, f) { return false; }
+    if separated(cross(na.a0, bb.b0), tt, na, bb, hb, s, f) { return false; }
+    if separated(cross(na.a0, bb.b1), tt, na, bb, hb, s, f) { return false; }
+    if separated(cross(na.a0, bb.b2), tt, na, bb, hb, s, f) { return false; }
+    if separated(cross(na.a1, bb.b0), tt, na, bb, hb, s, f) { return false; }
+    if separated(cross(na.a1, bb.b1), tt, na, bb, hb, s, f) { return false; }
+    if separated(cross(na.a1, bb.b2), tt, na, bb, hb, s, f) { return false; }
+    if separated(cross(na.a2, bb.b0), tt, na, bb, hb, s, f) { return false; }
+    if separated(cross(na.a2, bb.b1), tt, na, bb, hb, s, f) { return false; }
+    if separated(cross(na.a2, bb.b2), tt, na, bb, hb, s, f) { return false; }
+    return true;
+}
+
+// ---- triangle-triangle test ----
+
+const TRI_DISJOINT: u32 = 0u;
+const TRI_TOUCH: u32 = 1u;
+const TRI_UNCERTAIN: u32 = 2u;
+
+// Sign of v when |v| > e for certain; 0 means "not certain" (NaN included).
+fn sgn(v: f32, e: f32) -> i32 {
+    if v > e { return 1; }
+    if v < -e { return -1; }
+    return 0;
+}
+
+// Side of w against the plane of (x, y, z), as Guigue-Devillers compute it:
+// dot(w - z, (x - z) x (y - z)) = det(y - x, z - x, w - x) (positive: w above the
+// counter-clockwise triangle).
+fn orient(x: vec3<f32>, y: vec3<f32>, z: vec3<f32>, w: vec3<f32>) -> f32 {
+    return dot(w - z, cross(x - z, y - z));
+}
+
+// Guigue-Devillers CHECK_MIN_MAX in the canonical configuration: p1 alone on the positive side
+// of plane 2 and p2 alone on the positive side of plane 1; the triangles meet iff both values
+// are <= 0.
+fn check_min_max(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
+                 p2: vec3<f32>, q2: vec3<f32>, r2: vec3<f32>, e: f32) -> u32 {
+    let v1 = sgn(dot(q2 - q1, cross(p2 - q1, p1 - q1)), e);
+    let v2 = sgn(dot(r2 - p1, cross(p2 - p1, r1 - p1)), e);
+    if v1 > 0 || v2 > 0 { return TRI_DISJOINT; }
+    if v1 < 0 && v2 < 0 { return TRI_TOUCH; }
+    return TRI_UNCERTAIN;
+}
+
+// Second permutation step: make p2 the lone vertex of triangle 2 w.r.t. plane 1 (signs strict).
+fn tri_tri_3d(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
+              p2: vec3<f32>, q2: vec3<f32>, r2: vec3<f32>,
+              sp2: i32, sq2: i32, sr2: i32, e: f32) -> u32 {
+    if sp2 > 0 {
+        if sq2 > 0 { return check_min_max(p1, r1, q1, r2, p2, q2, e); }
+        if sr2 > 0 { return check_min_max(p1, r1, q1, q2, r2, p2, e); }
+        return check_min_max(p1, q1, r1, p2, q2, r2, e);
+    }
+    if sq2 < 0 { return check_min_max(p1, q1, r1, r2, p2, q2, e); }
+    if sr2 < 0 { return check_min_max(p1, q1, r1, q2, r2, p2, e); }
+    return check_min_max(p1, r1, q1, p2, q2, r2, e);
+}
+
+// Decides whether triangle (p1, q1, r1) (A frame) meets triangle (pb, qb, rb) (B frame, mapped by
+// the pose here). Every sign is taken only when the computed value exceeds a forward error bound
+// that covers the f32 storage of the vertices, the pose's rounding and the arithmetic; a sign that
+// is not certain (touching, coplanar, degenerate, or simply too close) makes the answer
+// TRI_UNCERTAIN and the CPU decides that pair exactly.
+fn tri_tri(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
+           pb: vec3<f32>, qb: vec3<f32>, rb: vec3<f32>) -> u32 {
+    let p2 = rot(pb) + pose.t.xyz;
+    let q2 = rot(qb) + pose.t.xyz;
+    let r2 = rot(rb) + pose.t.xyz;
+    // Per-coordinate distance of the points used here from the f64 points the exact test
+    // sees. A: stored rounded to nearest (U/2 |x|), or flushed (TAU). B: stored (U/2), R and t
+    // rounded (U/2 |pb|_1, U/2 |t|), rot() + t (gamma_4 (|pb|_1 + |t|), |pb|_1 <= 3 |pb|_inf):
+    // <= U (15 |pb| + 4.5 |t|) + 5 TAU.
+    let pa_mag = max(maxabs(p1), max(maxabs(q1), maxabs(r1)));
+    let pb_mag = max(maxabs(pb), max(maxabs(qb), maxabs(rb)));
+    let delta = (max(0.5 * U * pa_mag, U * (16.0 * pb_mag + 5.0 * maxabs(pose.t.xyz)))
+        + 8.0 * TAU) * 1.01;
+    // Box side of the six points bounds every coordinate difference (hi - lo rounds by U).
+    let lo = min(min(min(p1, q1), min(r1, p2)), min(q2, r2));
+    let hi = max(max(max(p1, q1), max(r1, p2)), max(q2, r2));
+    let ext = hi - lo;
+    let d = (max(ext.x, max(ext.y, ext.z)) + 2.0 * delta) * (1.0 + 4.0 * U);
+    // |computed det - exact det| for dot(w - z, cross(x - z, y - z)) with |differences| <= d:
+    // rounding: differences (U each, 3 factors), cross (gamma_2), dot (gamma_3): gamma_8 times
+    // the permanent (<= 6 d^3): 48 U d^3 (+ margin); input perturbation of each point by
+    // delta (differences by 2 delta): first, second and third order terms; flush to zero:
+    // ~20 operations, each loss scaled by at most 2 d^2 (a difference), d (a cross term) or
+    // 1: <= 64 TAU (1 + d)^2. Evaluated in f32 with margin 1.01 (all terms >= 0).
+    let dd = 1.0 + d;
+    let e = (50.0 * U * d * d * d + 32.0 * delta * d * d + 64.0 * delta * delta * d
+        + 42.0 * delta * delta * delta + 64.0 * TAU * dd * dd) * 1.01;
+
+    let sp1 = sgn(orient(p2, q2, r2, p1), e);
+    let sq1 = sgn(orient(p2, q2, r2, q1), e);
+    let sr1 = sgn(orient(p2, q2, r2, r1), e);
+    if sp1 != 0 && sp1 == sq1 && sp1 == sr1 { return TRI_DISJOINT; }
+    let sp2 = sgn(orient(p1, q1, r1, p2), e);
+    let sq2 = sgn(orient(p1, q1, r1, q2), e);
+    let sr2 = sgn(orient(p1, q1, r1, r2), e);
+    if sp2 != 0 && sp2 == sq2 && sp2 == sr2 { return TRI_DISJOINT; }
+    if sp1 == 0 || sq1 == 0 || sr1 == 0 || sp2 == 0 || sq2 == 0 || sr2 == 0 {
+        return TRI_UNCERTAIN;
+    }
+    // Generic case: both triangles strictly straddle the other's plane. Rotate triangle 1 so
+    // that its lone vertex comes first; if it lies on the negative side, flip plane 2 by
+    // swapping q2 and r2.
+    if sp1 > 0 {
+        if sq1 > 0 { return tri_tri_3d(r1, p1, q1, p2, r2, q2, sp2, sr2, sq2, e); }
+        if sr1 > 0 { return tri_tri_3d(q1, r1, p1, p2, r2, q2, sp2, sr2, sq2, e); }
+        return tri_tri_3d(p1, q1, r1, p2, q2, r2, sp2, sq2, sr2, e);
+    }
+    if sq1 < 0 { return tri_tri_3d(r1, p1, q1, p2, q2, r2, sp2, sq2, sr2, e); }
+    if sr1 < 0 { return tri_tri_3d(q1, r1, p1, p2, q2, r2, sp2, sq2, sr2, e); }
+    return tri_tri_3d(p1, q1, r1, p2, r2, q2, sp2, sr2, sq2, e);
+}
+
+fn emit(p: u32, ia: u32, ib: u32, uncertain: bool) {
+    let slot = atomicAdd(&state.out, 1u);
+    if slot < params.caps.y {
+        var tag = ib;
+        if uncertain {
+            tag = ib | UNCERTAIN_FLAG;
+        }
+        out_pairs[slot] = vec4<u32>(p, ia, tag, 0u);
+    }
+}
+
+fn leaf_pair(p: u32, na: Node, nb: Node) {
+    let lay = arena.tri_layout;
+    for (var i = 0u; i < na.count; i++) {
+        let ja = pose.base.y + na.first + i;
+        let a0 = load(tris, lay, 3u, ja, 0u);
+        let a1 = load(tris, lay, 3u, ja, 1u);
+        let a2 = load(tris, lay, 3u, ja, 2u);
+        for (var j = 0u; j < nb.count; j++) {
+            let jb = pose.base.w + nb.first + j;
+            let b0 = load(tris, lay, 3u, jb, 0u);
+            let b1 = load(tris, lay, 3u, jb, 1u);
+            let b2 = load(tris, lay, 3u, jb, 2u);
+            let r = tri_tri(a0.xyz, a1.xyz, a2.xyz, b0.xyz, b1.xyz, b2.xyz);
+            if r != TRI_DISJOINT {
+                emit(p, u32(a0.w), u32(b0.w), r == TRI_UNCERTAIN);
+            }
+        }
+    }
+}
+
+@compute @workgroup_size(64)
+fn traverse(@builtin(workgroup_id) wid: vec3<u32>,
+            @builtin(num_workgroups) nwg: vec3<u32>,
+            @builtin(local_invocation_index) lid: u32) {
+    let idx = (wid.y * nwg.x + wid.x) * WG + lid;
+    if idx >= state.cur {
+        return;
+    }
+    let entry = frontier_in[idx];
+    pose = pairs[entry.x];
+    // Node indices in the frontier are relative to each mesh's first node.
+    let pair = entry.yz;
+    let na = load_node(pose.base.x + pair.x);
+    let nb = load_node(pose.base.z + pair.y);
+    if !obb_overlap(na, nb) {
+        return;
+    }
+    let a_leaf = na.count > 0u;
+    let b_leaf = nb.count > 0u;
+    if a_leaf && b_leaf {
+        leaf_pair(entry.x, na, nb);
+        return;
+    }
+    // Descend both trees at once where both are internal: the pair tree's depth is then the
+    // deeper of the two trees, which bounds the number of levels recorded on the CPU.
+    var ca = vec2<u32>(pair.x, pair.x);
+    var nca = 1u;
+    if !a_leaf {
+        ca = vec2<u32>(pair.x + 1u, na.right);
+        nca = 2u;
+    }
+    var cb = vec2<u32>(pair.y, pair.y);
+    var ncb = 1u;
+    if !b_leaf {
+        cb = vec2<u32>(pair.y + 1u, nb.right);
+        ncb = 2u;
+    }
+    let k = nca * ncb;
+    let base = atomicAdd(&state.next, k);
+    // Past capacity nothing is written; the control pass sees next > capacity and flags overflow.
+    if base + k <= params.caps.x {
+        var w = base;
+        for (var i = 0u; i < nca; i++) {
+            for (var j = 0u; j < ncb; j++) {
+                frontier_out[w] = vec4<u32>(entry.x, ca[i], cb[j], 0u);
+                w++;
+            }
+        }
+    }
+}

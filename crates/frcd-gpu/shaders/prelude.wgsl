@@ -1,0 +1,83 @@
+// frcd-gpu: the WGSL prelude every frcd shader is compiled with (prepended to each file).
+// One declaration of each struct the shaders and the CPU share; the Rust mirrors are in
+// frcd-gpu's `layout` module and a test checks them against naga's reflection of this file.
+
+// ---- frcd-gpgpu: pair traversal (traverse.wgsl, control.wgsl) ----
+
+// Counters of one batch's traversal.
+struct State {
+    // Entries in the current frontier (set by the control pass).
+    cur: u32,
+    // Entries appended to the next frontier (may exceed the capacity: overflow).
+    next: atomic<u32>,
+    // Triangle pairs appended to the output (may exceed the capacity: overflow).
+    out: atomic<u32>,
+    // Largest frontier size requested so far (control pass).
+    needed: u32,
+    // Levels that had work, and node pairs tested in total (control pass).
+    levels: u32,
+    pairs_tested: u32,
+    pad0: u32,
+    pad1: u32,
+}
+
+struct Params {
+    // frontier capacity, output capacity, max workgroups per dimension, pairs in the batch
+    caps: vec4<u32>,
+}
+
+// Shape of the mesh arena textures.
+struct Arena {
+    // items per texture row, rows per layer, unused, unused
+    node_layout: vec4<u32>,
+    tri_layout: vec4<u32>,
+}
+
+// One body pair of a batch: the relative pose (rows of R: B local -> A local, and t; w
+// unused) and the item bases of the two meshes in the arena.
+struct PairInfo {
+    r0: vec4<f32>,
+    r1: vec4<f32>,
+    r2: vec4<f32>,
+    t: vec4<f32>,
+    // A's first node, A's first triangle, B's first node, B's first triangle
+    base: vec4<u32>,
+}
+
+// ---- frcd-gpgpu: many-body box pass (boxes.wgsl) ----
+
+// A box as four f32 corners rounded from f64: outer (lo down, hi up), inner (lo up, hi down).
+struct BodyBox {
+    lo_dn: vec4<f32>,
+    hi_up: vec4<f32>,
+    lo_up: vec4<f32>,
+    hi_dn: vec4<f32>,
+}
+
+struct BoxParams {
+    // body count, output capacity, unused, unused
+    n: vec4<u32>,
+}
+
+// ---- frcd-image (raster.wgsl, resolve.wgsl) ----
+
+struct Draw {
+    // Maps a vertex (f32, relative to its mesh's centre) to clip space; composed in f64 on the
+    // CPU relative to the overlap region's centre so the f32 entries stay small.
+    clip_from_local: mat4x4<f32>,
+}
+
+struct ResolveParams {
+    width: u32,
+    height: u32,
+    // Facing code written by fs_peel for faces where the view ray enters the solid.
+    entering_code: u32,
+    _pad0: u32,
+    // Depth of the overlap region's near face; lengths are measured from it to keep f32 small.
+    depth_ref: f32,
+    // World length of the whole depth range [0, 1].
+    depth_scale: f32,
+    _pad1: f32,
+    _pad2: f32,
+}
+

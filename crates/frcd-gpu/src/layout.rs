@@ -1,0 +1,169 @@
+//! `#[repr(C)]` Rust mirrors of the structs declared in the WGSL [`crate::PRELUDE`]: what the CPU
+//! writes to and reads from the shaders' buffers, by name instead of word offsets.
+//! `tests/layout.rs` checks every mirror (size, member names, offsets and sizes) against naga's
+//! reflection of the prelude, so the two cannot drift apart.
+
+use bytemuck::{Pod, Zeroable};
+
+/// `State`: the counters of one frcd-gpgpu traversal batch (read back after the batch).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct State {
+    /// Entries in the current frontier (0 when the traversal finished).
+    pub cur: u32,
+    /// Entries appended to the next frontier.
+    pub next: u32,
+    /// Triangle pairs appended to the output (may exceed its capacity: overflow).
+    pub out: u32,
+    /// Largest frontier size requested (may exceed its capacity: overflow).
+    pub needed: u32,
+    /// Levels that had work.
+    pub levels: u32,
+    /// Node pairs tested.
+    pub pairs_tested: u32,
+    /// Padding.
+    pub pad0: u32,
+    /// Padding.
+    pub pad1: u32,
+}
+
+/// `Params`: capacities of one frcd-gpgpu batch.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct Params {
+    /// Frontier capacity, output capacity, max workgroups per dimension, pairs in the batch.
+    pub caps: [u32; 4],
+}
+
+/// `Arena`: shape of frcd-gpgpu's mesh arena textures.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct Arena {
+    /// Nodes per row, rows per layer, unused, unused.
+    pub node_layout: [u32; 4],
+    /// Triangles per row, rows per layer, unused, unused.
+    pub tri_layout: [u32; 4],
+}
+
+/// `PairInfo`: one body pair of a frcd-gpgpu batch.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct PairInfo {
+    /// Row 0 of R (B local to A local), w unused.
+    pub r0: [f32; 4],
+    /// Row 1 of R.
+    pub r1: [f32; 4],
+    /// Row 2 of R.
+    pub r2: [f32; 4],
+    /// Translation, w unused.
+    pub t: [f32; 4],
+    /// A's first node, A's first triangle, B's first node, B's first triangle.
+    pub base: [u32; 4],
+}
+
+/// `BodyBox`: one body's world box for the box pass, outer and inner f32 corners.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct BodyBox {
+    /// Lower corner rounded down.
+    pub lo_dn: [f32; 4],
+    /// Upper corner rounded up.
+    pub hi_up: [f32; 4],
+    /// Lower corner rounded up.
+    pub lo_up: [f32; 4],
+    /// Upper corner rounded down.
+    pub hi_dn: [f32; 4],
+}
+
+/// `BoxParams`: body count and output capacity of the box pass.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct BoxParams {
+    /// Body count, output capacity, unused, unused.
+    pub n: [u32; 4],
+}
+
+/// `Draw`: frcd-image's clip-from-local matrix (column-major).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Draw {
+    /// Column-major 4×4 matrix.
+    pub clip_from_local: [[f32; 4]; 4],
+}
+
+/// `ResolveParams`: frcd-image's per-layer resolve parameters.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct ResolveParams {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Facing code of faces where the view ray enters the solid.
+    pub entering_code: u32,
+    /// Padding.
+    pub _pad0: u32,
+    /// Depth of the overlap region's near face.
+    pub depth_ref: f32,
+    /// World length of the depth range.
+    pub depth_scale: f32,
+    /// Padding.
+    pub _pad1: f32,
+    /// Padding.
+    pub _pad2: f32,
+}
+
+/// Every mirror as `(WGSL name, size, [(member, offset, size)])`, for the reflection test.
+#[doc(hidden)]
+pub fn mirrors() -> Vec<(&'static str, usize, Vec<(&'static str, usize, usize)>)> {
+    use std::mem::{offset_of, size_of};
+    macro_rules! m {
+        ($t:ident { $($f:ident : $ft:ty),* }) => {
+            (stringify!($t), size_of::<$t>(), vec![$((stringify!($f), offset_of!($t, $f), size_of::<$ft>())),*])
+        };
+    }
+    vec![
+        m!(State {
+            cur: u32,
+            next: u32,
+            out: u32,
+            needed: u32,
+            levels: u32,
+            pairs_tested: u32,
+            pad0: u32,
+            pad1: u32
+        }),
+        m!(Params { caps: [u32; 4] }),
+        m!(Arena {
+            node_layout: [u32; 4],
+            tri_layout: [u32; 4]
+        }),
+        m!(PairInfo {
+            r0: [f32; 4],
+            r1: [f32; 4],
+            r2: [f32; 4],
+            t: [f32; 4],
+            base: [u32; 4]
+        }),
+        m!(BodyBox {
+            lo_dn: [f32; 4],
+            hi_up: [f32; 4],
+            lo_up: [f32; 4],
+            hi_dn: [f32; 4]
+        }),
+        m!(BoxParams { n: [u32; 4] }),
+        m!(Draw {
+            clip_from_local: [[f32; 4]; 4]
+        }),
+        m!(ResolveParams {
+            width: u32,
+            height: u32,
+            entering_code: u32,
+            _pad0: u32,
+            depth_ref: f32,
+            depth_scale: f32,
+            _pad1: f32,
+            _pad2: f32
+        }),
+    ]
+}

@@ -1,0 +1,155 @@
+#![doc = include_str!("../README.md")]
+#![warn(missing_docs)]
+#![forbid(unsafe_code)]
+
+pub mod layout;
+
+/// The WGSL prelude prepended to every frcd shader (see [`with_prelude`]).
+pub const PRELUDE: &str = include_str!("../shaders/prelude.wgsl");
+
+/// `source` with the [`PRELUDE`] in front: the text a pipeline is created from.
+pub fn with_prelude(source: &str) -> String {
+    format!("{PRELUDE}\n{source}")
+}
+
+/// Setup and readback failures. Every variant keeps the typed wgpu cause as its source.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SetupError {
+    /// No adapter (GPU or software driver) could be found.
+    #[error("no GPU adapter found")]
+    NoAdapter(#[source] wgpu::RequestAdapterError),
+    /// The adapter refused to create a device.
+    #[error("could not create a device on adapter '{adapter}'")]
+    RequestDevice {
+        /// Adapter name.
+        adapter: String,
+        /// The driver's reason.
+        #[source]
+        source: wgpu::RequestDeviceError,
+    },
+    /// Waiting for a submission failed (device lost, timeout).
+    #[error("waiting for the GPU failed")]
+    Poll(#[source] wgpu::PollError),
+    /// Mapping a buffer for reading failed.
+    #[error("mapping a GPU buffer for reading failed")]
+    Map(#[source] wgpu::BufferAsyncError),
+    /// The map callback was dropped without an answer.
+    #[error("the GPU buffer map callback never ran")]
+    MapDropped,
+    /// The mapped range could not be read.
+    #[error("reading the mapped GPU buffer failed")]
+    MapRange(#[source] wgpu::MapRangeError),
+}
+
+/// Options of [`request_adapter`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct AdapterOptions {
+    /// Restrict the instance to these backends; `None`: every backend compiled in, narrowed by
+    /// `WGPU_BACKEND` (and `WGPU_ADAPTER_NAME` is honoured).
+    pub backends: Option<wgpu::Backends>,
+    /// Prefer an integrated / low-power adapter.
+    pub low_power: bool,
+    /// Ask for the fallback (software) adapter only.
+    pub force_fallback_adapter: bool,
+}
+
+/// A headless adapter (no surface).
+pub fn request_adapter(options: &AdapterOptions) -> Result<wgpu::Adapter, SetupError> {
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+    if let Some(b) = options.backends {
+        desc.backends = b;
+    }
+    let instance = wgpu::Instance::new(desc);
+    if *options == AdapterOptions::default() {
+        return pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
+            &instance, None,
+        ))
+        .map_err(SetupError::NoAdapter);
+    }
+    pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+        power_preference: if options.low_power {
+            wgpu::PowerPreference::LowPower
+        } else {
+            wgpu::PowerPreference::HighPerformance
+        },
+        force_fallback_adapter: options.force_fallback_adapter,
+        compatible_surface: None,
+        ..Default::default()
+    }))
+    .map_err(SetupError::NoAdapter)
+}
+
+/// A device and queue on `adapter` with exactly `features` and `limits`.
+pub fn request_device(
+    adapter: &wgpu::Adapter,
+    label: &str,
+    features: wgpu::Features,
+    limits: wgpu::Limits,
+) -> Result<(wgpu::Device, wgpu::Queue), SetupError> {
+    pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some(label),
+        required_features: features,
+        required_limits: limits,
+        ..Default::default()
+    }))
+    .map_err(|source| SetupError::RequestDevice {
+        adapter: adapter.get_info().name,
+        source,
+    })
+}
+
+/// The driver's full description of a wgpu error (its `Display` is only the kind).
+pub fn describe(e: &wgpu::Error) -> String {
+    match e {
+        wgpu::Error::Validation { description, .. } | wgpu::Error::Internal { description, .. } => {
+            description.clone()
+        }
+        other => other.to_string(),
+    }
+}
+
+/// Maps `buffer[..len]` for reading once submission `index` has finished, waiting for that
+/// submission only (not for other work queued on the device, e.g. an engine's frame), and
+/// returns a copy of the bytes.
+pub fn read_back(
+    device: &wgpu::Device,
+    buffer: &wgpu::Buffer,
+    len: u64,
+    index: wgpu::SubmissionIndex,
+) -> Result<Vec<u8>, SetupError> {
+    let slice = buffer.slice(..len);
+    let (tx, rx) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    device
+        .poll(wgpu::PollType::Wait {
+            submission_index: Some(index),
+            timeout: None,
+        })
+        .map_err(SetupError::Poll)?;
+    // The callback normally ran inside that poll; if another thread's poll holds it, poll
+    // without waiting until it has run.
+    let mapped = loop {
+        match rx.try_recv() {
+            Ok(r) => break r,
+            Err(std::sync::mpsc::TryRecvError::Empty) => {
+                device
+                    .poll(wgpu::PollType::Poll)
+                    .map_err(SetupError::Poll)?;
+                std::thread::yield_now();
+            }
+            Err(std::sync::mpsc::TryRecvError::Disconnected) => {
+                return Err(SetupError::MapDropped);
+            }
+        }
+    };
+    mapped.map_err(SetupError::Map)?;
+    let bytes = slice
+        .get_mapped_range()
+        .map_err(SetupError::MapRange)?
+        .to_vec();
+    buffer.unmap();
+    Ok(bytes)
+}
