@@ -49,12 +49,12 @@ fn o3_value(a: DVec3, b: DVec3, c: DVec3, d: DVec3) -> f64 {
 /// `max` that compiles to one instruction (no NaN fix-up: a NaN input makes the float values
 /// NaN, which never pass the `|v| > bound` test, so NaN cannot be trusted by accident).
 #[inline(always)]
-fn fmax(a: f64, b: f64) -> f64 {
+pub(crate) fn fmax(a: f64, b: f64) -> f64 {
     if a > b { a } else { b }
 }
 
 #[inline(always)]
-fn fmin(a: f64, b: f64) -> f64 {
+pub(crate) fn fmin(a: f64, b: f64) -> f64 {
     if a < b { a } else { b }
 }
 
@@ -77,7 +77,7 @@ fn all_same_sign(s: [i8; 3]) -> bool {
 
 /// All three values certain (and therefore non-zero). Non-short-circuit `&`: one branch.
 #[inline(always)]
-fn certain(a: f64, b: f64, c: f64, bound: f64) -> bool {
+pub(crate) fn certain(a: f64, b: f64, c: f64, bound: f64) -> bool {
     (a.abs() > bound) & (b.abs() > bound) & (c.abs() > bound)
 }
 
@@ -139,22 +139,35 @@ pub(crate) fn exact(ta: &[DVec3; 3], tb: &[DVec3; 3]) -> bool {
         return exact_slow(ta, tb, bound);
     }
 
-    // Both triangles cross the other's plane and every sign is certain and non-zero: the
-    // Guigue-Devillers permutation by table (A rotated so its lone vertex comes first, B's
-    // orientation flipped when that vertex is on the negative side; then the same for B).
-    let (la, pa) = lone_nonzero(sp, sq, sr);
+    gd_final(ta, tb, [sp, sq, sr], [tp, tq, tr], bound)
+}
+
+/// The end of the filtered test, once both triangles cross the other's plane with every
+/// plane-side sign certain and non-zero: the Guigue-Devillers permutation by table (A rotated
+/// so its lone vertex comes first, B's orientation flipped when that vertex is on the negative
+/// side; then the same for B) and the two final orientations, each trusted when its f64 value
+/// exceeds `bound` (a valid Shewchuk stage-A bound for any `orient3d` of the six vertices) and
+/// recomputed exactly otherwise. `s`: A's vertices against plane(B), `t`: B's against plane(A).
+#[inline(always)]
+pub(crate) fn gd_final(
+    ta: &[DVec3; 3],
+    tb: &[DVec3; 3],
+    s: [f64; 3],
+    t: [f64; 3],
+    bound: f64,
+) -> bool {
+    let (la, pa) = lone_nonzero(s[0], s[1], s[2]);
     let bi = SWAP[pa as usize];
-    let t = [tp, tq, tr];
     let (lb, pb) = lone_nonzero(t[bi[0]], t[bi[1]], t[bi[2]]);
     let ra = ROT[la];
     let ai = SWAP[pb as usize];
     let rb = ROT[lb];
-    let a = [p1, q1, r1];
-    let b = [p2, q2, r2];
+    let a = *ta;
+    let b = *tb;
     let (p1, q1, r1) = (a[ra[ai[0]]], a[ra[ai[1]]], a[ra[ai[2]]]);
     let (p2, q2, r2) = (b[bi[rb[0]]], b[bi[rb[1]]], b[bi[rb[2]]]);
 
-    // The two final orientations; overlap iff both <= 0.
+    // The two final orientations; overlap iff both <= 0. NaN bounds are never passed.
     let v1 = o3_value(q1, p2, p1, q2);
     let v2 = o3_value(p1, p2, r1, r2);
     if (v1.abs() > bound) & (v2.abs() > bound) {
@@ -167,7 +180,7 @@ pub(crate) fn exact(ta: &[DVec3; 3], tb: &[DVec3; 3]) -> bool {
 /// the filter's range): Guigue-Devillers with each uncertain sign recomputed exactly.
 #[cold]
 #[inline(never)]
-fn exact_slow(ta: &[DVec3; 3], tb: &[DVec3; 3], bound: f64) -> bool {
+pub(crate) fn exact_slow(ta: &[DVec3; 3], tb: &[DVec3; 3], bound: f64) -> bool {
     let [p1, q1, r1] = *ta;
     let [p2, q2, r2] = *tb;
     let d1 = [
