@@ -91,8 +91,6 @@ pub(crate) fn lone_nonzero(s0: f64, s1: f64, s2: f64) -> (usize, bool) {
     (l, (bits >> l) & 1 == 1)
 }
 
-const ROT: [[usize; 3]; 3] = [[0, 1, 2], [1, 2, 0], [2, 0, 1]];
-const SWAP: [[usize; 3]; 2] = [[0, 2, 1], [0, 1, 2]];
 
 /// The exact test. See [`crate::exact`].
 #[inline]
@@ -142,12 +140,39 @@ pub(crate) fn exact(ta: &[DVec3; 3], tb: &[DVec3; 3]) -> bool {
     gd_final(ta, tb, [sp, sq, sr], [tp, tq, tr], bound)
 }
 
+/// For three non-zero values not all of one sign: (the index of the lone vertex, whether it is
+/// on the positive side), from a table packed into a constant (no memory load on the critical
+/// path).
+#[inline(always)]
+fn lone_packed(s: [f64; 3]) -> (usize, bool) {
+    // LONE[bits] = [0, 0, 1, 2, 2, 1, 0, 0] in 2-bit fields.
+    const LONE: u32 = (1 << 4) | (2 << 6) | (2 << 8) | (1 << 10);
+    let bits = (s[0] > 0.0) as u32 | ((s[1] > 0.0) as u32) << 1 | ((s[2] > 0.0) as u32) << 2;
+    let l = (LONE >> (2 * bits)) & 3;
+    (l as usize, (bits >> l) & 1 == 1)
+}
+
+/// `(i + 1) % 3` and `(i + 2) % 3` for `i < 3`, from packed tables.
+#[inline(always)]
+fn next_prev(i: usize) -> (usize, usize) {
+    const NEXT: usize = 1 | (2 << 2);
+    const PREV: usize = 2 | (1 << 4);
+    ((NEXT >> (2 * i)) & 3, (PREV >> (2 * i)) & 3)
+}
+
 /// The end of the filtered test, once both triangles cross the other's plane with every
-/// plane-side sign certain and non-zero: the Guigue-Devillers permutation by table (A rotated
-/// so its lone vertex comes first, B's orientation flipped when that vertex is on the negative
-/// side; then the same for B) and the two final orientations, each trusted when its f64 value
-/// exceeds `bound` (a valid Shewchuk stage-A bound for any `orient3d` of the six vertices) and
-/// recomputed exactly otherwise. `s`: A's vertices against plane(B), `t`: B's against plane(A).
+/// plane-side sign certain and non-zero. `s`: A's vertices against plane(B), `t`: B's against
+/// plane(A) (only their signs are used).
+///
+/// Guigue-Devillers: with `p1` A's lone vertex and `p2` B's, A's other two vertices `q1, r1`
+/// in A's order (swapped when `p2` is on the negative side of plane(A)), and B's `q2, r2` in B's
+/// order (swapped when `p1` is on the negative side of plane(B)), the triangles meet iff
+/// `orient3d(q1, p2, p1, q2) ≤ 0` and `orient3d(p1, p2, r1, r2) ≤ 0`. The permutation is index
+/// arithmetic; both orientations are computed from the differences to `p1`
+/// (`det[p2−q1, p1−q1, q2−q1] = −P·(Q1×Q2)` and `det[p2−p1, r1−p1, r2−p1] = P·(R1×R2)` with
+/// `P = p2−p1`, `Q1 = q1−p1`, ...), Shewchuk's stage-A form, so `bound` (a valid stage-A
+/// bound for any `orient3d` of the six vertices) certifies them; an uncertain one is
+/// recomputed exactly.
 #[inline(always)]
 pub(crate) fn gd_final(
     ta: &[DVec3; 3],
@@ -156,20 +181,19 @@ pub(crate) fn gd_final(
     t: [f64; 3],
     bound: f64,
 ) -> bool {
-    let (la, pa) = lone_nonzero(s[0], s[1], s[2]);
-    let bi = SWAP[pa as usize];
-    let (lb, pb) = lone_nonzero(t[bi[0]], t[bi[1]], t[bi[2]]);
-    let ra = ROT[la];
-    let ai = SWAP[pb as usize];
-    let rb = ROT[lb];
-    let a = *ta;
-    let b = *tb;
-    let (p1, q1, r1) = (a[ra[ai[0]]], a[ra[ai[1]]], a[ra[ai[2]]]);
-    let (p2, q2, r2) = (b[bi[rb[0]]], b[bi[rb[1]]], b[bi[rb[2]]]);
+    let (la, pa) = lone_packed(s);
+    let (lb, pb) = lone_packed(t);
+    let (na, pra) = next_prev(la);
+    let (nb, prb) = next_prev(lb);
+    let (iq1, ir1) = if pb { (na, pra) } else { (pra, na) };
+    let (iq2, ir2) = if pa { (nb, prb) } else { (prb, nb) };
+    let (p1, q1, r1) = (ta[la], ta[iq1], ta[ir1]);
+    let (p2, q2, r2) = (tb[lb], tb[iq2], tb[ir2]);
 
-    // The two final orientations; overlap iff both <= 0. NaN bounds are never passed.
-    let v1 = o3_value(q1, p2, p1, q2);
-    let v2 = o3_value(p1, p2, r1, r2);
+    let pp = p2 - p1;
+    let v1 = -pp.dot((q1 - p1).cross(q2 - p1));
+    let v2 = pp.dot((r1 - p1).cross(r2 - p1));
+    // Overlap iff both <= 0. A NaN bound is never passed.
     if (v1.abs() > bound) & (v2.abs() > bound) {
         return (v1 < 0.0) & (v2 < 0.0);
     }
