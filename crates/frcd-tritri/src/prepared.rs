@@ -50,7 +50,7 @@
 //! [`crate::exact`]'s grows with the pair's extent): that only sends more pairs to the exact
 //! fallback far from the origin, and costs no correctness. Test meshes in the frame of one of
 //! them (as frcd-obb does) and the coordinates stay small.
-use crate::exact::{exact_slow, fmax, fmin, gd_final};
+use crate::exact::{certainty, exact_slow, fmax, fmin, gd_final, separation};
 use frcd_geom::predicates::EPS;
 use frcd_geom::{DVec3, Triangle};
 
@@ -183,28 +183,6 @@ impl From<Triangle> for PreparedTriangle {
 fn orient_bound(ma: f64, mb: f64) -> f64 {
     let u = fmax(ma, mb);
     floored(ORIENT_FACTOR * u * u * u)
-}
-
-#[inline(always)]
-fn min3(a: f64, b: f64, c: f64) -> f64 {
-    fmin(fmin(a, b), c)
-}
-
-#[inline(always)]
-fn max3(a: f64, b: f64, c: f64) -> f64 {
-    fmax(fmax(a, b), c)
-}
-
-/// Positive iff the three values certainly have one strict sign (`bound` not NaN).
-#[inline(always)]
-fn separation(s0: f64, s1: f64, s2: f64, bound: f64) -> f64 {
-    fmax(min3(s0, s1, s2) - bound, -max3(s0, s1, s2) - bound)
-}
-
-/// Positive iff all three signs are certain (`bound` not NaN).
-#[inline(always)]
-fn certainty(s0: f64, s1: f64, s2: f64, bound: f64) -> f64 {
-    min3(s0.abs(), s1.abs(), s2.abs()) - bound
 }
 
 /// The exact test on prepared triangles: the same answer as [`crate::exact`] on the triangles
@@ -410,76 +388,58 @@ impl TriangleBatch {
         hits
     }
 
-    /// Lane `k`, which the filter did not separate: finish it exactly.
+    /// Lane `k`, which the vectorised stage did not separate: the rest of [`exact_prepared`]
+    /// for that pair (the lane's vertices against `t`'s plane, then the final orientations).
     #[inline]
     fn decide(&self, t: &PreparedTriangle, k: usize, f: &Filtered) -> bool {
         let v = self.vertices(k);
-        let bound = orient_bound(t.m, self.m[k]);
-        if f.certain >> k & 1 == 1 {
-            gd_final(
-                &t.v,
-                &v,
-                [f.s[0][k], f.s[1][k], f.s[2][k]],
-                [f.t[0][k], f.t[1][k], f.t[2][k]],
-                bound,
-            )
-        } else {
-            exact_slow(&t.v, &v, bound)
+        let ba = floored((t.m + self.m[k]) * t.c);
+        let tt = v.map(|x| t.n.dot(x) - t.d);
+        if separation(tt[0], tt[1], tt[2], ba) > 0.0 {
+            return false;
         }
+        let s = [f.s[0][k], f.s[1][k], f.s[2][k]];
+        let cert = fmin(
+            certainty(s[0], s[1], s[2], f.bb[k]),
+            certainty(tt[0], tt[1], tt[2], ba),
+        );
+        let bound = orient_bound(t.m, self.m[k]);
+        if !(cert > 0.0) {
+            return exact_slow(&t.v, &v, bound);
+        }
+        gd_final(&t.v, &v, s, tt, bound)
     }
 
-    /// The float filter over all lanes, branch-free and elementwise over the lanes (packed
-    /// instructions). `t` plays A of [`exact_prepared`], each lane B; the same values, bounds
-    /// and decisions as [`exact_prepared`] per lane.
+    /// The vectorised stage: `t`'s vertices against every lane's plane, branch-free and
+    /// elementwise over the lanes (packed instructions; `t`'s coordinates broadcast). A lane
+    /// is live unless `t` is certainly on one side of its plane. `t` plays A of
+    /// [`exact_prepared`], each lane B, with the same values and bounds.
     #[inline]
     fn filter(&self, t: &PreparedTriangle) -> Filtered {
-        let sab = lmap(|k| t.m + self.m[k]);
-        let bb = lmap(|k| floored(sab[k] * self.c[k]));
-        let ba = lmap(|k| floored(sab[k] * t.c));
-        // t's vertices against each lane's plane: n[k]·x − d[k] (x broadcast).
+        let bb = lmap(|k| floored((t.m + self.m[k]) * self.c[k]));
         let s: [Lanes; 3] = std::array::from_fn(|j| {
             let x = t.v[j];
             lmap(|k| self.n[0][k] * x.x + self.n[1][k] * x.y + self.n[2][k] * x.z - self.d[k])
         });
-        // Each lane's vertices against t's plane: n·v[j][k] − d (n broadcast).
-        let tt: [Lanes; 3] = std::array::from_fn(|j| {
-            let v = &self.v[j];
-            lmap(|k| t.n.x * v[0][k] + t.n.y * v[1][k] + t.n.z * v[2][k] - t.d)
-        });
-        let sep = lmap(|k| {
-            fmax(
-                separation(s[0][k], s[1][k], s[2][k], bb[k]),
-                separation(tt[0][k], tt[1][k], tt[2][k], ba[k]),
-            )
-        });
-        let cert = lmap(|k| {
-            fmin(
-                certainty(s[0][k], s[1][k], s[2][k], bb[k]),
-                certainty(tt[0][k], tt[1][k], tt[2][k], ba[k]),
-            )
-        });
+        let sep = lmap(|k| separation(s[0][k], s[1][k], s[2][k], bb[k]));
         let mut live = 0u32;
-        let mut certain = 0u32;
-        for k in 0..L {
-            live |= ((!(sep[k] > 0.0)) as u32) << k;
-            certain |= ((cert[k] > 0.0) as u32) << k;
+        for (k, &x) in sep.iter().enumerate() {
+            live |= ((!(x > 0.0)) as u32) << k;
         }
         Filtered {
             live: live & ((1u32 << self.len) - 1),
-            certain,
             s,
-            t: tt,
+            bb,
         }
     }
 }
 
-/// What the batch filter found: lanes not certainly separated (`live`), lanes whose six
-/// plane-side signs are all certain, and the plane-side values.
+/// What the vectorised stage found: the lanes not certainly separated (`live`), `t`'s
+/// plane-side values against each lane's plane, and their bounds.
 struct Filtered {
     live: u32,
-    certain: u32,
     s: [Lanes; 3],
-    t: [Lanes; 3],
+    bb: Lanes,
 }
 
 /// The exact test of one triangle against the triangles of consecutive batches (for example a
