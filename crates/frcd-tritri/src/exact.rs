@@ -116,7 +116,7 @@ pub(crate) fn exact(ta: &[DVec3; 3], tb: &[DVec3; 3]) -> bool {
     if separation(s[0], s[1], s[2], bound) > 0.0 {
         return false; // certainly all on one side
     }
-    if !(certainty(s[0], s[1], s[2], bound) > 0.0) {
+    if !is_positive(certainty(s[0], s[1], s[2], bound)) {
         return exact_slow(ta, tb, bound);
     }
     // Vertices of B against the plane of A (p2 - p1 = -(p1 - p2) exactly).
@@ -125,10 +125,16 @@ pub(crate) fn exact(ta: &[DVec3; 3], tb: &[DVec3; 3]) -> bool {
     if separation(t[0], t[1], t[2], bound) > 0.0 {
         return false;
     }
-    if !(certainty(t[0], t[1], t[2], bound) > 0.0) {
+    if !is_positive(certainty(t[0], t[1], t[2], bound)) {
         return exact_slow(ta, tb, bound);
     }
     gd_final(ta, tb, s, t, bound)
+}
+
+/// `x > 0`: false for NaN (an uncertain value never passes).
+#[inline(always)]
+pub(crate) fn is_positive(x: f64) -> bool {
+    x > 0.0
 }
 
 #[inline(always)]

@@ -110,7 +110,7 @@ fn batches_match_one_pair_and_oracle_random_and_near_degenerate() {
         // Scales and offsets: unit, tiny, subnormal, huge (past the filter's range), and
         // offsets where the cached bound is looser than the pair's extent.
         let (s, o) = match round % 7 {
-            0 | 1 | 2 => (1.0, DVec3::ZERO),
+            0..=2 => (1.0, DVec3::ZERO),
             3 => (1e-300, DVec3::ZERO),
             4 => (1e-315, DVec3::ZERO),
             5 => (1e301, DVec3::ZERO),
