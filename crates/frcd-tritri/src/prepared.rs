@@ -115,7 +115,9 @@ impl PreparedTriangle {
         let (a1, a2) = (f1.abs(), f2.abs());
         let pp =
             (a1.y * a2.z + a1.z * a2.y) + (a1.z * a2.x + a1.x * a2.z) + (a1.x * a2.y + a1.y * a2.x);
-        let am = p.abs().max(q.abs()).max(r.abs());
+        // One `maxsd` each (glam's `max` adds NaN handling; NaN is caught below).
+        let mx = |a: DVec3, b: DVec3| DVec3::new(fmax(a.x, b.x), fmax(a.y, b.y), fmax(a.z, b.z));
+        let am = mx(mx(p.abs(), q.abs()), r.abs());
         let m = fmax(fmax(am.x, am.y), am.z);
         // `<=` is false for NaN and infinities; a NaN coordinate makes `d` NaN (it reaches `n`
         // through the differences, then `d`), which `is_finite` rejects.
