@@ -7,12 +7,15 @@
 //! computed on the rounded coordinates). Every pair is labelled by an independent exact decision,
 //! rational LP feasibility (`frcd_benches::tritri_oracle`, which shares no code with
 //! `frcd_tritri::exact`). Prints false positives / false negatives per method and family, and
-//! fails (non-zero exit) if the exact method, or the topology of `intersection_segment`, is
-//! ever wrong.
+//! fails (non-zero exit) if the exact method (one pair, prepared one pair, or batched:
+//! `frcd_tritri::{exact, exact_prepared, TriangleBatch}`), or the topology of
+//! `intersection_segment`, is ever wrong.
 use anyhow::{Context, Result, bail};
 use frcd_benches::tritri_oracle::lp_intersects;
 use frcd_geom::{DQuat, DVec3, Triangle};
-use frcd_tritri::{Method, intersection_segment, intersects};
+use frcd_tritri::{
+    Method, PreparedTriangle, TriangleBatch, exact_prepared, intersection_segment, intersects,
+};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use std::time::Instant;
@@ -318,7 +321,10 @@ struct Tally {
     fp: [usize; 6],
     fneg: [usize; 6],
     contact_wrong: usize,
+    /// Disagreements of the prepared / batched exact forms with the label.
+    prepared_wrong: usize,
     exact_ns: u128,
+    prepared_ns: u128,
 }
 
 /// Entry point of `cargo xtask stress`.
@@ -372,6 +378,24 @@ pub fn run(args: &[String]) -> Result<()> {
                     exact_failures
                         .push(format!("{label} (swapped): oracle={want} a={a:?} b={b:?}"));
                 }
+                // The prepared one-pair test both ways, and each triangle against a batch
+                // holding the other: the same exact answer.
+                let (pa, pb) = (PreparedTriangle::new(&ta), PreparedTriangle::new(&tb));
+                let batch = TriangleBatch::from_prepared(&[pa, pb]).context("two lanes")?;
+                let prepared = [
+                    exact_prepared(&pa, &pb),
+                    exact_prepared(&pb, &pa),
+                    batch.intersect_mask(&pa) >> 1 & 1 == 1,
+                    batch.intersect_mask(&pb) & 1 == 1,
+                ];
+                for (k, &got) in prepared.iter().enumerate() {
+                    if got != want {
+                        t.prepared_wrong += 1;
+                        exact_failures.push(format!(
+                            "{label} (prepared form {k}): got={got} oracle={want} a={a:?} b={b:?}"
+                        ));
+                    }
+                }
                 if intersection_segment(&ta, &tb).is_some() != want {
                     t.contact_wrong += 1;
                 }
@@ -381,6 +405,19 @@ pub fn run(args: &[String]) -> Result<()> {
                 .map(|_| {
                     let s = Instant::now();
                     let n = set.iter().filter(|(a, b)| frcd_tritri::exact(a, b)).count();
+                    std::hint::black_box(n);
+                    s.elapsed().as_nanos()
+                })
+                .min()
+                .unwrap_or(0);
+            let prep: Vec<(PreparedTriangle, PreparedTriangle)> = set
+                .iter()
+                .map(|(a, b)| (PreparedTriangle::new(a), PreparedTriangle::new(b)))
+                .collect();
+            t.prepared_ns = (0..3)
+                .map(|_| {
+                    let s = Instant::now();
+                    let n = prep.iter().filter(|(a, b)| exact_prepared(a, b)).count();
                     std::hint::black_box(n);
                     s.elapsed().as_nanos()
                 })
@@ -400,7 +437,10 @@ pub fn run(args: &[String]) -> Result<()> {
     for n in &names {
         print!(" {:>16}", n);
     }
-    println!(" {:>8} {:>9}", "contact", "exact ns");
+    println!(
+        " {:>8} {:>9} {:>8} {:>7}",
+        "contact", "exact ns", "prep ns", "prep ok"
+    );
     let mut total = Tally::default();
     for (label, t) in &rows {
         print!("{:<22} {:>6} {:>6}", label, t.pairs, t.hits);
@@ -410,10 +450,13 @@ pub fn run(args: &[String]) -> Result<()> {
             total.fneg[mi] += t.fneg[mi];
         }
         println!(
-            " {:>8} {:>9.0}",
+            " {:>8} {:>9.0} {:>8.0} {:>7}",
             t.contact_wrong,
-            t.exact_ns as f64 / t.pairs.max(1) as f64
+            t.exact_ns as f64 / t.pairs.max(1) as f64,
+            t.prepared_ns as f64 / t.pairs.max(1) as f64,
+            if t.prepared_wrong == 0 { "yes" } else { "NO" }
         );
+        total.prepared_wrong += t.prepared_wrong;
         total.pairs += t.pairs;
         total.hits += t.hits;
         total.contact_wrong += t.contact_wrong;
@@ -438,16 +481,21 @@ pub fn run(args: &[String]) -> Result<()> {
         rows.iter().map(|(_, t)| t.exact_ns).sum::<u128>() as f64 / total.pairs.max(1) as f64,
         t0.elapsed().as_secs_f64()
     );
+    println!(
+        "exact_prepared: {:.0} ns per test over all families (triangles prepared beforehand, as a tree caches them)",
+        rows.iter().map(|(_, t)| t.prepared_ns).sum::<u128>() as f64 / total.pairs.max(1) as f64,
+    );
     let exact_wrong = total.fp[5] + total.fneg[5];
-    if exact_wrong > 0 || total.contact_wrong > 0 {
+    if exact_wrong > 0 || total.contact_wrong > 0 || total.prepared_wrong > 0 {
         for f in exact_failures.iter().take(o.show.max(1)) {
             eprintln!("EXACT WRONG: {f}");
         }
         bail!(
-            "exact method wrong on {exact_wrong} pairs, intersection_segment topology wrong on {} pairs",
+            "exact method wrong on {exact_wrong} pairs, its prepared / batched forms on {}, intersection_segment topology wrong on {} pairs",
+            total.prepared_wrong,
             total.contact_wrong
         );
     }
-    println!("exact: 0 wrong answers");
+    println!("exact (one pair, prepared, batched): 0 wrong answers");
     Ok(())
 }

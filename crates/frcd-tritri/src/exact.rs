@@ -25,9 +25,11 @@
 //! # Speed
 //!
 //! In the common case every sign is certain and the cost over a plain float Guigue-Devillers is
-//! the bound (15 `abs`, 14 `max`, a few multiplies), a few comparisons, and a table-driven
-//! permutation instead of Guigue-Devillers' nested branches. Uncertain signs take
-//! `exact_slow`, which recomputes only the uncertain ones exactly.
+//! the bound (15 `abs`, 14 `max`, a few multiplies) and a few comparisons; the Guigue-Devillers
+//! permutation is index arithmetic instead of nested branches. Uncertain
+//! signs take `exact_slow`, which recomputes only the uncertain ones exactly. Where the same
+//! triangles meet many others, [`crate::PreparedTriangle`] caches the bound's magnitudes and
+//! the normals instead.
 //!
 //! A sign within the bound is recomputed by [`orient3d_exact`]; the branch structure is then the
 //! exact Guigue-Devillers decision. Coplanar pairs and zero-area triangles (segments, points) go
@@ -49,12 +51,12 @@ fn o3_value(a: DVec3, b: DVec3, c: DVec3, d: DVec3) -> f64 {
 /// `max` that compiles to one instruction (no NaN fix-up: a NaN input makes the float values
 /// NaN, which never pass the `|v| > bound` test, so NaN cannot be trusted by accident).
 #[inline(always)]
-fn fmax(a: f64, b: f64) -> f64 {
+pub(crate) fn fmax(a: f64, b: f64) -> f64 {
     if a > b { a } else { b }
 }
 
 #[inline(always)]
-fn fmin(a: f64, b: f64) -> f64 {
+pub(crate) fn fmin(a: f64, b: f64) -> f64 {
     if a < b { a } else { b }
 }
 
@@ -75,12 +77,6 @@ fn all_same_sign(s: [i8; 3]) -> bool {
     s[0] != 0 && s[0] == s[1] && s[0] == s[2]
 }
 
-/// All three values certain (and therefore non-zero). Non-short-circuit `&`: one branch.
-#[inline(always)]
-fn certain(a: f64, b: f64, c: f64, bound: f64) -> bool {
-    (a.abs() > bound) & (b.abs() > bound) & (c.abs() > bound)
-}
-
 /// For three non-zero values not all of one sign: (the index of the lone vertex, whether it is
 /// on the positive side). Table lookup instead of Guigue-Devillers' nested branches.
 #[inline(always)]
@@ -90,9 +86,6 @@ pub(crate) fn lone_nonzero(s0: f64, s1: f64, s2: f64) -> (usize, bool) {
     let l = LONE[bits] as usize;
     (l, (bits >> l) & 1 == 1)
 }
-
-const ROT: [[usize; 3]; 3] = [[0, 1, 2], [1, 2, 0], [2, 0, 1]];
-const SWAP: [[usize; 3]; 2] = [[0, 2, 1], [0, 1, 2]];
 
 /// The exact test. See [`crate::exact`].
 #[inline]
@@ -116,47 +109,112 @@ pub(crate) fn exact(ta: &[DVec3; 3], tb: &[DVec3; 3]) -> bool {
     };
 
     // Vertices of A against the plane of B: orient3d(p2, q2, r2, x) = (x-p2)·((q2-p2)×(r2-p2)).
+    // (Sequential plane tests measured faster here than one combined branch: the second plane
+    // needs its own cross product and differences.)
     let n2 = f1.cross(f2);
-    let sp = dp.dot(n2);
-    let sq = dq.dot(n2);
-    let sr = dr.dot(n2);
-    if (fmin(fmin(sp, sq), sr) > bound) | (fmax(fmax(sp, sq), sr) < -bound) {
+    let s = [dp.dot(n2), dq.dot(n2), dr.dot(n2)];
+    if separation(s[0], s[1], s[2], bound) > 0.0 {
         return false; // certainly all on one side
     }
-    if !certain(sp, sq, sr, bound) {
+    if !is_positive(certainty(s[0], s[1], s[2], bound)) {
         return exact_slow(ta, tb, bound);
     }
-
-    // Vertices of B against the plane of A.
+    // Vertices of B against the plane of A (p2 - p1 = -(p1 - p2) exactly).
     let n1 = (q1 - p1).cross(r1 - p1);
-    let tp = (p2 - p1).dot(n1);
-    let tq = (q2 - p1).dot(n1);
-    let tr = (r2 - p1).dot(n1);
-    if (fmin(fmin(tp, tq), tr) > bound) | (fmax(fmax(tp, tq), tr) < -bound) {
+    let t = [(-dp).dot(n1), (q2 - p1).dot(n1), (r2 - p1).dot(n1)];
+    if separation(t[0], t[1], t[2], bound) > 0.0 {
         return false;
     }
-    if !certain(tp, tq, tr, bound) {
+    if !is_positive(certainty(t[0], t[1], t[2], bound)) {
         return exact_slow(ta, tb, bound);
     }
+    gd_final(ta, tb, s, t, bound)
+}
 
-    // Both triangles cross the other's plane and every sign is certain and non-zero: the
-    // Guigue-Devillers permutation by table (A rotated so its lone vertex comes first, B's
-    // orientation flipped when that vertex is on the negative side; then the same for B).
-    let (la, pa) = lone_nonzero(sp, sq, sr);
-    let bi = SWAP[pa as usize];
-    let t = [tp, tq, tr];
-    let (lb, pb) = lone_nonzero(t[bi[0]], t[bi[1]], t[bi[2]]);
-    let ra = ROT[la];
-    let ai = SWAP[pb as usize];
-    let rb = ROT[lb];
-    let a = [p1, q1, r1];
-    let b = [p2, q2, r2];
-    let (p1, q1, r1) = (a[ra[ai[0]]], a[ra[ai[1]]], a[ra[ai[2]]]);
-    let (p2, q2, r2) = (b[bi[rb[0]]], b[bi[rb[1]]], b[bi[rb[2]]]);
+/// `x > 0`: false for NaN (an uncertain value never passes).
+#[inline(always)]
+pub(crate) fn is_positive(x: f64) -> bool {
+    x > 0.0
+}
 
-    // The two final orientations; overlap iff both <= 0.
-    let v1 = o3_value(q1, p2, p1, q2);
-    let v2 = o3_value(p1, p2, r1, r2);
+#[inline(always)]
+fn min3(a: f64, b: f64, c: f64) -> f64 {
+    fmin(fmin(a, b), c)
+}
+
+#[inline(always)]
+fn max3(a: f64, b: f64, c: f64) -> f64 {
+    fmax(fmax(a, b), c)
+}
+
+/// Positive iff the three values certainly have one strict sign: `min > bound` or
+/// `max < −bound` (`fl(x − y) > 0` iff `x > y`). Never positive for a NaN or `+∞` bound.
+#[inline(always)]
+pub(crate) fn separation(s0: f64, s1: f64, s2: f64, bound: f64) -> f64 {
+    fmax(min3(s0, s1, s2) - bound, -max3(s0, s1, s2) - bound)
+}
+
+/// Positive iff all three signs are certain (`|s_i| > bound`). Never positive for a `+∞`
+/// bound; callers never pass a NaN one.
+#[inline(always)]
+pub(crate) fn certainty(s0: f64, s1: f64, s2: f64, bound: f64) -> f64 {
+    min3(s0.abs(), s1.abs(), s2.abs()) - bound
+}
+
+/// For three non-zero values not all of one sign: (the index of the lone vertex, whether it is
+/// on the positive side), from a table packed into a constant (no memory load on the critical
+/// path).
+#[inline(always)]
+fn lone_packed(s: [f64; 3]) -> (usize, bool) {
+    // LONE[bits] = [0, 0, 1, 2, 2, 1, 0, 0] in 2-bit fields.
+    const LONE: u32 = (1 << 4) | (2 << 6) | (2 << 8) | (1 << 10);
+    let bits = (s[0] > 0.0) as u32 | ((s[1] > 0.0) as u32) << 1 | ((s[2] > 0.0) as u32) << 2;
+    let l = (LONE >> (2 * bits)) & 3;
+    (l as usize, (bits >> l) & 1 == 1)
+}
+
+/// `(i + 1) % 3` and `(i + 2) % 3` for `i < 3`, from packed tables.
+#[inline(always)]
+fn next_prev(i: usize) -> (usize, usize) {
+    const NEXT: usize = 1 | (2 << 2);
+    const PREV: usize = 2 | (1 << 4);
+    ((NEXT >> (2 * i)) & 3, (PREV >> (2 * i)) & 3)
+}
+
+/// The end of the filtered test, once both triangles cross the other's plane with every
+/// plane-side sign certain and non-zero. `s`: A's vertices against plane(B), `t`: B's against
+/// plane(A) (only their signs are used).
+///
+/// Guigue-Devillers: with `p1` A's lone vertex and `p2` B's, A's other two vertices `q1, r1`
+/// in A's order (swapped when `p2` is on the negative side of plane(A)), and B's `q2, r2` in B's
+/// order (swapped when `p1` is on the negative side of plane(B)), the triangles meet iff
+/// `orient3d(q1, p2, p1, q2) ≤ 0` and `orient3d(p1, p2, r1, r2) ≤ 0`. The permutation is index
+/// arithmetic; both orientations are computed from the differences to `p1`
+/// (`det[p2−q1, p1−q1, q2−q1] = −P·(Q1×Q2)` and `det[p2−p1, r1−p1, r2−p1] = P·(R1×R2)` with
+/// `P = p2−p1`, `Q1 = q1−p1`, ...), Shewchuk's stage-A form, so `bound` (a valid stage-A
+/// bound for any `orient3d` of the six vertices) certifies them; an uncertain one is
+/// recomputed exactly.
+#[inline(always)]
+pub(crate) fn gd_final(
+    ta: &[DVec3; 3],
+    tb: &[DVec3; 3],
+    s: [f64; 3],
+    t: [f64; 3],
+    bound: f64,
+) -> bool {
+    let (la, pa) = lone_packed(s);
+    let (lb, pb) = lone_packed(t);
+    let (na, pra) = next_prev(la);
+    let (nb, prb) = next_prev(lb);
+    let (iq1, ir1) = if pb { (na, pra) } else { (pra, na) };
+    let (iq2, ir2) = if pa { (nb, prb) } else { (prb, nb) };
+    let (p1, q1, r1) = (ta[la], ta[iq1], ta[ir1]);
+    let (p2, q2, r2) = (tb[lb], tb[iq2], tb[ir2]);
+
+    let pp = p2 - p1;
+    let v1 = -pp.dot((q1 - p1).cross(q2 - p1));
+    let v2 = pp.dot((r1 - p1).cross(r2 - p1));
+    // Overlap iff both <= 0. A NaN bound is never passed.
     if (v1.abs() > bound) & (v2.abs() > bound) {
         return (v1 < 0.0) & (v2 < 0.0);
     }
@@ -167,7 +225,7 @@ pub(crate) fn exact(ta: &[DVec3; 3], tb: &[DVec3; 3]) -> bool {
 /// the filter's range): Guigue-Devillers with each uncertain sign recomputed exactly.
 #[cold]
 #[inline(never)]
-fn exact_slow(ta: &[DVec3; 3], tb: &[DVec3; 3], bound: f64) -> bool {
+pub(crate) fn exact_slow(ta: &[DVec3; 3], tb: &[DVec3; 3], bound: f64) -> bool {
     let [p1, q1, r1] = *ta;
     let [p2, q2, r2] = *tb;
     let d1 = [

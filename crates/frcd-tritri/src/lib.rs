@@ -13,6 +13,12 @@
 //! | [`shen`] | Shen, Heng & Tang 2003, signed distances | f64, absolute ε = 1e-7 |
 //! | [`tropp`] | Tropp, Tal & Shimshoni 2006, shared determinants | f64 |
 //!
+//! For many tests against the same triangles, [`PreparedTriangle`] caches what the exact
+//! filter's error bound needs (normal, per-axis magnitudes), so [`exact_prepared`] pays a few
+//! multiplies per pair for it; [`TriangleBatch`] and [`intersects_batch`] test one triangle
+//! against the 4-8 triangles of a tree leaf with the filter vectorised over the leaf. Both give
+//! exactly the answers of [`exact`].
+//!
 //! [`intersection_segment`] reports the contact itself (point, segment, or the overlap polygon
 //! of coplanar triangles).
 //!
@@ -29,14 +35,21 @@
 mod contact;
 mod exact;
 mod float;
+mod prepared;
 
 pub use contact::{Contact, intersection_segment};
 pub use float::{MOLLER_EPSILON, SHEN_EPSILON};
 use frcd_geom::DVec3;
 pub use frcd_geom::Triangle;
+pub use prepared::{
+    BATCH_LANES, PreparedTriangle, TriangleBatch, exact_prepared, intersects_batch,
+};
 
 /// Which triangle-triangle test to run.
+///
+/// Non-exhaustive: more methods may come; match with a wildcard arm (or use [`Method::ALL`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+#[non_exhaustive]
 pub enum Method {
     /// Zou et al. 2008 (reconstructed, see [`zou`]).
     Zou,

@@ -1,7 +1,7 @@
 //! Every method against an independent exact oracle (rational LP feasibility, shared with
 //! `cargo xtask stress`), on generic pairs and on each degenerate family.
 use frcd_geom::DVec3;
-use frcd_tritri::{Method, Triangle, intersects};
+use frcd_tritri::{Method, PreparedTriangle, Triangle, TriangleBatch, exact_prepared, intersects};
 use proptest::prelude::*;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -39,6 +39,24 @@ fn variants(a: &Triangle, b: &Triangle) -> Vec<(Triangle, Triangle)> {
     out
 }
 
+/// The prepared one-pair test both ways, and `y` as lane 2 of a batch tested against `x`
+/// (the other lanes hold `x` itself and copies of `y` moved away, so the batch mixes answers).
+fn prepared_answers(x: &Triangle, y: &Triangle) -> [bool; 3] {
+    let (px, py) = (PreparedTriangle::new(x), PreparedTriangle::new(y));
+    let far = |d: f64| {
+        let o = DVec3::new(d, -d, 0.5 * d);
+        PreparedTriangle::new(&Triangle::new(y.v[0] + o, y.v[1] + o, y.v[2] + o))
+    };
+    let batch = TriangleBatch::from_prepared(&[px, far(3.0), py, far(-7.0)]).expect("4 lanes");
+    let mask = batch.intersect_mask(&px);
+    assert_eq!(mask & 1, 1, "a triangle always meets itself: {x:?}");
+    [
+        exact_prepared(&px, &py),
+        exact_prepared(&py, &px),
+        mask >> 2 & 1 == 1,
+    ]
+}
+
 fn check_exact(a: &Triangle, b: &Triangle, expect: bool, what: &str) {
     assert_eq!(
         lp(a, b),
@@ -47,6 +65,11 @@ fn check_exact(a: &Triangle, b: &Triangle, expect: bool, what: &str) {
     );
     for (x, y) in variants(a, b) {
         assert_eq!(frcd_tritri::exact(&x, &y), expect, "{what}: {x:?} {y:?}");
+        assert_eq!(
+            prepared_answers(&x, &y),
+            [expect; 3],
+            "{what} (prepared / batch): {x:?} {y:?}"
+        );
     }
 }
 
@@ -268,6 +291,7 @@ fn exact_matches_oracle_on_integer_grid() {
         // Exact is invariant under swapping and every vertex permutation, degenerate or not.
         for (x, y) in variants(&a, &b).into_iter().step_by(7) {
             assert_eq!(frcd_tritri::exact(&x, &y), want, "{x:?} {y:?}");
+            assert_eq!(prepared_answers(&x, &y), [want; 3], "{x:?} {y:?}");
         }
     }
     assert!(
@@ -291,6 +315,7 @@ fn exact_matches_oracle_near_degenerate() {
         let b = Triangle::new(on, o + r(&mut rng), o + r(&mut rng));
         let want = lp(&a, &b);
         assert_eq!(frcd_tritri::exact(&a, &b), want, "{a:?} {b:?}");
+        assert_eq!(prepared_answers(&a, &b), [want; 3], "{a:?} {b:?}");
     }
 }
 
@@ -346,16 +371,20 @@ proptest! {
         prop_assert_eq!(base, lp(&a, &b));
         let s = 2f64.powi(k);
         let sc = |x: &Triangle| Triangle::new(x.v[0] * s, x.v[1] * s, x.v[2] * s);
+        prop_assert_eq!(prepared_answers(&a, &b), [base; 3]);
         prop_assert_eq!(frcd_tritri::exact(&sc(&a), &sc(&b)), base, "scale 2^{}", k);
+        prop_assert_eq!(prepared_answers(&sc(&a), &sc(&b)), [base; 3], "scale 2^{}", k);
         // Translation: coordinates are multiples of 2^-6 below 2^7, offsets multiples of 1 below
         // 2^30: sums need < 43 bits.
         let o = DVec3::new(off[0] as f64, off[1] as f64, off[2] as f64);
         let q = 1.0 / 64.0;
         let tr = |x: &Triangle| Triangle::new(x.v[0] * q + o, x.v[1] * q + o, x.v[2] * q + o);
         prop_assert_eq!(frcd_tritri::exact(&tr(&a), &tr(&b)), base, "offset {:?}", o);
+        prop_assert_eq!(prepared_answers(&tr(&a), &tr(&b)), [base; 3], "offset {:?}", o);
         // Offsets up to 1e8 with the unit grid.
         let o8 = DVec3::new(1e8, -1e8, 3e7);
         let tr8 = |x: &Triangle| Triangle::new(x.v[0] + o8, x.v[1] + o8, x.v[2] + o8);
         prop_assert_eq!(frcd_tritri::exact(&tr8(&a), &tr8(&b)), base);
+        prop_assert_eq!(prepared_answers(&tr8(&a), &tr8(&b)), [base; 3]);
     }
 }
