@@ -121,9 +121,11 @@ pub struct Collision {
 /// operations, so the exact triangle test sees the same f64 coordinates in both.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RelativeFrame {
-    /// Rotation from B's frame to A's.
+    /// Rotation from B's frame to A's (internal: read it with [`RelativeFrame::rotation`]).
+    #[doc(hidden)]
     pub m: DMat3,
-    /// B's origin in A's frame.
+    /// B's origin in A's frame (internal: read it with [`RelativeFrame::translation`]).
+    #[doc(hidden)]
     pub t: DVec3,
 }
 
@@ -135,6 +137,16 @@ impl RelativeFrame {
             m: rel.rotation_matrix(),
             t: rel.translation,
         }
+    }
+
+    /// Rotation from B's frame to A's.
+    pub fn rotation(&self) -> DMat3 {
+        self.m
+    }
+
+    /// B's origin in A's frame.
+    pub fn translation(&self) -> DVec3 {
+        self.t
     }
 
     /// Maps a B-local point into A's frame.
