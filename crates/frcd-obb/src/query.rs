@@ -226,6 +226,8 @@ pub struct PairCache {
     skip: u32,
     /// Length of the next back-off.
     backoff: u32,
+    /// Motion bound of the last query (how far any point of B moved in A's frame).
+    delta: f64,
 }
 
 impl PairCache {
@@ -258,6 +260,7 @@ impl PairCache {
                 + dm.z_axis.length_squared())
             .sqrt();
             let delta = (frame.t - p.t).length() + fro * b.radius_from_origin;
+            self.delta = delta;
             self.clock += delta * (1.0 + 1e-9);
             if !self.clock.is_finite() {
                 self.front.clear();
@@ -602,28 +605,34 @@ pub fn collide_cached(
         }
     }
     let mut found = None;
-    let pairs = &mut c.pairs;
-    let mut hit = |x: u32, y: u32| {
-        if first {
-            found = Some((x, y));
-            true
-        } else {
-            pairs.push((x, y));
-            false
-        }
-    };
-    let use_front = !cache.front.is_empty() && cache.skip == 0;
+    // A front only pays when the bodies moved by a small part of their size since the last
+    // query: after larger motion (random poses, teleports) every margin has expired, so the
+    // cache neither walks nor records a front.
+    let coherent = cache.delta <= 0.1 * a.sphere.radius.min(b.sphere.radius);
+    let mut use_front = coherent && !cache.front.is_empty() && cache.skip == 0;
     if use_front {
         let mut old = std::mem::take(&mut cache.front);
         let mut new = std::mem::take(&mut cache.scratch);
         new.clear();
         let before = ctx.counters.work();
-        walk_front(&mut ctx, &old, &mut new, cache.clock, first, &mut hit);
+        // The walk may spend at most half a fresh traversal: a stale front is abandoned early.
+        let budget = cache.fresh_work / 2;
+        let mut hit = hit_fn(first, &mut found, &mut c.pairs);
+        let done = walk_front(
+            &mut ctx,
+            &old,
+            &mut new,
+            cache.clock,
+            first,
+            budget,
+            &mut hit,
+        );
+        drop(hit);
         let work = ctx.counters.work() - before + old.len() as u64 / 8;
         old.clear();
         cache.front = new;
         cache.scratch = old;
-        if 10 * work > 9 * cache.fresh_work {
+        if !done || 10 * work > 9 * cache.fresh_work {
             // The front saved less than a tenth of a fresh traversal: drop it and back off.
             cache.front.clear();
             cache.backoff = (cache.backoff * 2).clamp(1, 64);
@@ -631,14 +640,23 @@ pub fn collide_cached(
         } else {
             cache.backoff = 0;
         }
-    } else {
+        if !done {
+            // Abandoned half way: start again from the root (the pairs found so far would be
+            // found again).
+            c.pairs.clear();
+            found = None;
+            use_front = false;
+        }
+    }
+    if !use_front {
         cache.skip = cache.skip.saturating_sub(1);
         // Record a front only when the next query will try it.
-        let record = cache.skip == 0;
+        let record = coherent && cache.skip == 0;
         let mut front = std::mem::take(&mut cache.front);
         front.clear();
         let before = ctx.counters.work();
         let mut stack = Vec::with_capacity(64);
+        let mut hit = hit_fn(first, &mut found, &mut c.pairs);
         ctx.descend(
             0,
             0,
@@ -646,7 +664,13 @@ pub fn collide_cached(
             record.then_some((&mut front, cache.clock)),
             &mut hit,
         );
-        cache.fresh_work = ctx.counters.work() - before;
+        // A running mean: a first-contact traversal's work varies with where the hit is.
+        let work = ctx.counters.work() - before;
+        cache.fresh_work = if cache.fresh_work == 0 {
+            work
+        } else {
+            (3 * cache.fresh_work + work) / 4
+        };
         cache.front = front;
     }
     if first {
@@ -656,20 +680,41 @@ pub fn collide_cached(
     finish(&ctx, request, c)
 }
 
+/// The hit callback of a cached query: first contact stores the pair and stops, all pairs
+/// collects them.
+fn hit_fn<'a>(
+    first: bool,
+    found: &'a mut Option<(u32, u32)>,
+    pairs: &'a mut Vec<(u32, u32)>,
+) -> impl FnMut(u32, u32) -> bool + 'a {
+    move |x, y| {
+        if first {
+            *found = Some((x, y));
+            true
+        } else {
+            pairs.push((x, y));
+            false
+        }
+    }
+}
+
 /// Runs the query on the old front (a cut of the traversal tree) and builds the new one:
 /// separated pairs whose margin still exceeds the motion since their test are kept untested;
 /// the others are traversed afresh from where they are. In first-contact mode the leaf pairs
 /// whose boxes overlapped last time go first, and after a hit the entries not reached are
 /// kept as they are. Every leaf pair is covered exactly once whatever `old` holds, so the
-/// answer never depends on the cache.
+/// answer never depends on the cache. Returns `false` (the walk abandoned, its results
+/// incomplete) as soon as the walk's work exceeds `budget`.
 fn walk_front(
     ctx: &mut Ctx<'_>,
     old: &[FrontEntry],
     new: &mut Vec<FrontEntry>,
     clock: f64,
     first: bool,
+    budget: u64,
     hit: &mut impl FnMut(u32, u32) -> bool,
-) {
+) -> bool {
+    let start = ctx.counters.work();
     let mut stack = Vec::with_capacity(64);
     let limit = clock + ctx.slack;
     let passes: &[Option<u8>] = if first {
@@ -689,6 +734,9 @@ fn walk_front(
                 new.push(*e);
                 continue;
             }
+            if ctx.counters.work() - start > budget {
+                return false;
+            }
             if ctx.descend(e.a, e.b, &mut stack, Some((new, clock)), hit) {
                 // First contact found: keep every entry not reached yet.
                 let rest = old.iter().enumerate().filter(|&(k2, e2)| {
@@ -700,8 +748,9 @@ fn walk_front(
                     }
                 });
                 new.extend(rest.map(|(_, e2)| *e2));
-                return;
+                return true;
             }
         }
     }
+    true
 }

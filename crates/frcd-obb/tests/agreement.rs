@@ -282,6 +282,7 @@ fn coherent_front_does_less_work() {
                 ..Request::default()
             };
             let (plain, cached, cache) = work_of(&ta, &tb, &poses, &req);
+            eprintln!("{label} {mode:?}: work plain {plain}, cached {cached}");
             assert!(
                 3 * cached <= plain,
                 "{label} {mode:?}: cached work {cached} vs plain {plain}"
@@ -313,6 +314,7 @@ fn cache_never_costs_on_incoherent_motion() {
             ..Request::default()
         };
         let (plain, cached, _) = work_of(&ta, &tb, &poses, &req);
+        eprintln!("random poses {mode:?}: work plain {plain}, cached {cached}");
         assert!(
             10 * cached <= 11 * plain,
             "{mode:?}: cached work {cached} vs plain {plain}"
