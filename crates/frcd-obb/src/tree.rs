@@ -41,7 +41,10 @@ pub struct BuildOptions {
     /// `obb/build`; see the crate README).
     pub fit: FitMethod,
     /// Most triangles in a leaf (a node with at most this many triangles becomes a leaf).
-    /// `0` is treated as `1`.
+    /// `0` is treated as `1`. The default, 1, was measured against 2 and 4 on every bench class
+    /// (`FRCD_BENCH_LEAF`, see the crate README): 1 was fastest or within noise on the dense
+    /// sweep and the real CAD pairs (leaf 4 was 1.6-2.5× slower on the wagon/bogie pairs), 2
+    /// about 25 % faster on the near-contact knots; larger leaves save memory and build time.
     pub max_leaf_triangles: u32,
 }
 
