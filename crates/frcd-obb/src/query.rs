@@ -742,7 +742,7 @@ fn walk_front(
                 let rest = old.iter().enumerate().filter(|&(k2, e2)| {
                     let overlap = e2.kind == OVERLAP;
                     if p == 0 && first {
-                        (k2 > k && overlap) || !overlap
+                        k2 > k || !overlap
                     } else {
                         k2 > k && !(first && overlap)
                     }
