@@ -1,21 +1,28 @@
-//! frcd-obb against parry3d (f32) and parry3d-f64 on the same meshes and poses, in one run.
+//! frcd-obb against parry3d-f64 on the same meshes and poses, in one run.
 //!
 //! ```text
 //! cargo bench -p frcd-benches --bench obb -- --warm-up-time 1 --measurement-time 3
+//! FRCD_BENCH_ONLY=knots_near,cad cargo bench -p frcd-benches --bench obb -- obb/
 //! ```
 //!
-//! Before timing, every scene is answered once by frcd, by both parrys and by the exact oracle
-//! ([`frcd_obb::oracle`]); the agreement is printed (frcd must equal the oracle; parry's
-//! differences are reported, not asserted). One criterion iteration = the whole step sequence.
+//! Before timing, every scene is answered by frcd (plain and cached), by parry3d-f64 and by the
+//! exact oracle ([`frcd_obb::oracle`]) on a subset of its steps; frcd must equal the oracle,
+//! parry's differences are reported, not asserted. Then a per-step pass prints, for each
+//! scene and mode, the medians of the disjoint and of the touching steps for frcd, frcd cached
+//! and parry3d-f64, the sequence totals and ratios, and frcd's work per query (box tests,
+//! triangle tests, ns per box test on the disjoint steps). One criterion iteration = the whole
+//! step sequence.
 //!
-//! - `build/*`: tree construction (frcd OBB tree vs parry's AABB BVH inside `TriMesh::new`);
-//! - `spheres_l5`, `spheres_l6` (scene a): two icospheres, 20,480 / 81,920 triangles each, B
-//!   sliding through A in 200 steps; FirstContact and AllPairs;
-//! - `knots` (scene b): two 49,920-triangle torus knots in near contact, small rotations, 500
-//!   steps; FirstContact and AllPairs, with and without the coherence cache;
-//! - `sparse_1000` (scene c): every body pair of 1,000 sparse bodies (no broad phase), hybrid
-//!   top volume vs root OBB only; `world_10000`: a `World` step loop over 10,000 bodies;
-//! - `fit/*`: query time of trees built with each fit rule (the default is the fastest).
+//! - `build/*`: tree construction (frcd OBB tree vs parry's BVH inside `TriMesh::new`);
+//! - `dense` (class 1): two 20,480-triangle icospheres, B sliding through A in 200 steps;
+//! - `knots_near` (class 2): two 49,920-triangle torus knots in near contact, small rotations,
+//!   500 steps, 292 of them disjoint;
+//! - `cad_*` (class 3): real meshes from `../shared/meshes` at random poses near first contact
+//!   (incoherent), 100 steps each (SKIP when the folder is absent): the intermodal wagon
+//!   underframe (18,824 triangles) against the bogie frame (5,268), two bogie frames, two
+//!   fandisks (5,750);
+//! - `knots_slow` (class 4): the knots turning slowly and steadily (coherent), 200 steps;
+//! - `sparse/*` (class 5): every body pair of 1,000 sparse bodies, and a `World` over 10,000.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use frcd_benches::scenes::{self, Scene};
@@ -25,7 +32,7 @@ use frcd_obb::{
 };
 use std::hint::black_box;
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 macro_rules! parry_backend {
     ($m:ident, $krate:ident, $real:ty) => {
@@ -53,11 +60,29 @@ macro_rules! parry_backend {
                 )
             }
 
-            /// parry's boolean composite-composite test.
-            pub fn first_contact(m1: &TriMesh, p1: &Pose, m2: &TriMesh, p2: &Pose) -> bool {
+            /// parry's boolean composite-composite test (`query::intersection_test`).
+            pub fn intersection_test(m1: &TriMesh, p1: &Pose, m2: &TriMesh, p2: &Pose) -> bool {
                 $krate::query::intersection_test(p1, m1, p2, m2)
                     .expect("trimesh pairs are supported")
                     .intersecting
+            }
+
+            /// First contact by parry's lazy simultaneous BVH traversal (`Bvh::leaf_pairs`),
+            /// stopping at the first intersecting triangle pair: on near-contact scenes much
+            /// faster than `intersection_test`, so it is the one timed.
+            pub fn first_contact(m1: &TriMesh, p1: &Pose, m2: &TriMesh, p2: &Pose) -> bool {
+                let pos12 = p1.inv_mul(p2);
+                m1.bvh()
+                    .leaf_pairs(m2.bvh(), |n1, n2| {
+                        n1.aabb().intersects(&n2.aabb().transform_by(&pos12))
+                    })
+                    .any(|(i, j)| {
+                        intersection_test_support_map_support_map(
+                            &pos12,
+                            &m1.triangle(i),
+                            &m2.triangle(j),
+                        )
+                    })
             }
 
             /// Every intersecting triangle pair: parry's simultaneous BVH traversal
@@ -85,39 +110,23 @@ macro_rules! parry_backend {
     };
 }
 
-parry_backend!(p32, parry3d, f32);
 parry_backend!(p64, parry3d_f64, f64);
 
-/// Two-body scene prepared for every backend.
+/// Two-body scene prepared for both backends.
 struct Pair {
     scene: Scene,
     frcd: [Arc<ObbTree>; 2],
-    m32: [parry3d::shape::TriMesh; 2],
     m64: [parry3d_f64::shape::TriMesh; 2],
-    poses32: Vec<[parry3d::math::Pose; 2]>,
     poses64: Vec<[parry3d_f64::math::Pose; 2]>,
 }
 
-fn prepare(scene: Scene, fit: FitMethod) -> Pair {
-    let opts = BuildOptions {
-        fit,
-        ..BuildOptions::default()
-    };
-    let tree = |i: usize| Arc::new(ObbTree::build(&scene.bodies[i].mesh, &opts));
+fn prepare(scene: Scene, opts: &BuildOptions) -> Pair {
+    let tree = |i: usize| Arc::new(ObbTree::build(&scene.bodies[i].mesh, opts));
     let frcd = [tree(0), tree(1)];
-    let m32 = [
-        p32::mesh(&scene.bodies[0].mesh),
-        p32::mesh(&scene.bodies[1].mesh),
-    ];
     let m64 = [
         p64::mesh(&scene.bodies[0].mesh),
         p64::mesh(&scene.bodies[1].mesh),
     ];
-    let poses32 = scene
-        .frames
-        .iter()
-        .map(|f| [p32::pose(&f[0]), p32::pose(&f[1])])
-        .collect();
     let poses64 = scene
         .frames
         .iter()
@@ -126,9 +135,7 @@ fn prepare(scene: Scene, fit: FitMethod) -> Pair {
     Pair {
         scene,
         frcd,
-        m32,
         m64,
-        poses32,
         poses64,
     }
 }
@@ -140,90 +147,175 @@ fn req(mode: Mode) -> Request {
     }
 }
 
-fn frcd_run(p: &Pair, mode: Mode) -> Vec<Vec<(u32, u32)>> {
-    let r = req(mode);
-    p.scene
-        .frames
-        .iter()
-        .map(|f| {
-            let c = collide(&p.frcd[0], &f[0], &p.frcd[1], &f[1], &r);
-            match mode {
-                Mode::AllPairs => c.pairs,
-                Mode::FirstContact => c.witness.into_iter().collect(),
-            }
-        })
-        .collect()
-}
-
-/// Agreement of everyone with the oracle, printed once per scene.
-fn agreement(p: &Pair) {
+/// frcd (plain and cached) against the oracle on every `stride`-th step (the cache sees every
+/// step); parry3d-f64's differences printed.
+fn agreement(p: &Pair, stride: usize) {
     let (ma, mb) = (&p.scene.bodies[0].mesh, &p.scene.bodies[1].mesh);
-    let truth: Vec<Vec<(u32, u32)>> = p
-        .scene
-        .frames
-        .iter()
-        .map(|f| oracle::pairs(ma, &f[0], mb, &f[1]))
-        .collect();
-    let all = frcd_run(p, Mode::AllPairs);
-    let first = frcd_run(p, Mode::FirstContact);
-    let frcd_ok = all == truth
-        && first.iter().zip(&truth).all(|(w, t)| {
-            w.is_empty() == t.is_empty() && w.iter().all(|x| t.binary_search(x).is_ok())
-        });
-    assert!(frcd_ok, "{}: frcd differs from the oracle", p.scene.name);
-    let touching = truth.iter().filter(|t| !t.is_empty()).count();
-    let total: usize = truth.iter().map(|t| t.len()).sum();
-    eprintln!(
-        "[agreement] {}: {} steps, {} touching, {} pairs in all; frcd == oracle (both modes)",
-        p.scene.name,
-        truth.len(),
-        touching,
-        total
-    );
-    let report = |name: &str, bools: Vec<bool>, pairs: Vec<Vec<(u32, u32)>>| {
-        let bool_diff = bools
-            .iter()
-            .zip(&truth)
-            .filter(|(b, t)| **b == t.is_empty())
-            .count();
-        let (mut missing, mut extra, mut steps) = (0, 0, 0);
-        for (g, t) in pairs.iter().zip(&truth) {
-            let m = t.iter().filter(|x| g.binary_search(x).is_err()).count();
-            let e = g.iter().filter(|x| t.binary_search(x).is_err()).count();
-            missing += m;
-            extra += e;
-            steps += (m + e > 0) as usize;
+    let (ta, tb) = (&p.frcd[0], &p.frcd[1]);
+    let mut caches = [PairCache::new(), PairCache::new()];
+    let (mut checked, mut touching, mut total) = (0, 0, 0);
+    let (mut bool_diff, mut missing, mut extra) = (0, 0, 0);
+    for (k, f) in p.scene.frames.iter().enumerate() {
+        let all = collide(ta, &f[0], tb, &f[1], &req(Mode::AllPairs));
+        let first = collide(ta, &f[0], tb, &f[1], &req(Mode::FirstContact));
+        let all_c = collide_cached(ta, &f[0], tb, &f[1], &req(Mode::AllPairs), &mut caches[0]);
+        let first_c = collide_cached(
+            ta,
+            &f[0],
+            tb,
+            &f[1],
+            &req(Mode::FirstContact),
+            &mut caches[1],
+        );
+        assert_eq!(all.pairs, all_c.pairs, "{} step {k}: cached", p.scene.name);
+        assert_eq!(first.collide, first_c.collide, "{} step {k}", p.scene.name);
+        if k % stride != 0 {
+            continue;
         }
-        eprintln!(
-            "[agreement] {}: {name}: first-contact wrong in {bool_diff} steps; all-pairs differs in {steps} steps ({missing} pairs missing, {extra} extra)",
+        let truth = oracle::pairs(ma, &f[0], mb, &f[1]);
+        assert_eq!(
+            all.pairs, truth,
+            "{} step {k}: frcd differs from the oracle",
             p.scene.name
         );
-    };
-    report(
-        "parry3d f32",
-        p.poses32
+        for w in [first.witness, first_c.witness].into_iter().flatten() {
+            assert!(truth.binary_search(&w).is_ok(), "{} step {k}", p.scene.name);
+        }
+        assert_eq!(first.collide, !truth.is_empty());
+        assert_eq!(first_c.collide, !truth.is_empty());
+        let q = &p.poses64[k];
+        let got = p64::all_pairs(&p.m64[0], &q[0], &p.m64[1], &q[1]);
+        bool_diff +=
+            (p64::first_contact(&p.m64[0], &q[0], &p.m64[1], &q[1]) == truth.is_empty()) as usize;
+        bool_diff += (p64::intersection_test(&p.m64[0], &q[0], &p.m64[1], &q[1])
+            == truth.is_empty()) as usize;
+        missing += truth
             .iter()
-            .map(|q| p32::first_contact(&p.m32[0], &q[0], &p.m32[1], &q[1]))
-            .collect(),
-        p.poses32
+            .filter(|x| got.binary_search(x).is_err())
+            .count();
+        extra += got
             .iter()
-            .map(|q| p32::all_pairs(&p.m32[0], &q[0], &p.m32[1], &q[1]))
-            .collect(),
-    );
-    report(
-        "parry3d-f64",
-        p.poses64
-            .iter()
-            .map(|q| p64::first_contact(&p.m64[0], &q[0], &p.m64[1], &q[1]))
-            .collect(),
-        p.poses64
-            .iter()
-            .map(|q| p64::all_pairs(&p.m64[0], &q[0], &p.m64[1], &q[1]))
-            .collect(),
+            .filter(|x| truth.binary_search(x).is_err())
+            .count();
+        checked += 1;
+        touching += !truth.is_empty() as usize;
+        total += truth.len();
+    }
+    eprintln!(
+        "[agreement] {}: {checked} of {} steps checked, {touching} touching, {total} pairs; frcd == oracle (both modes, cached and not); parry3d-f64: first contact wrong in {bool_diff}, all pairs {missing} missing, {extra} extra",
+        p.scene.name,
+        p.scene.steps()
     );
 }
 
-fn pair_group(c: &mut Criterion, group: &str, p: &Pair, coherence: bool) {
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Per-step times (best of four runs of the sequence) of frcd, frcd cached and parry3d-f64;
+/// prints disjoint and touching medians, totals, ratios and frcd's work per query.
+fn split(p: &Pair) {
+    let (ta, tb) = (&p.frcd[0], &p.frcd[1]);
+    let n = p.scene.steps();
+    for mode in [Mode::FirstContact, Mode::AllPairs] {
+        let r = req(mode);
+        let mut t = [
+            vec![f64::INFINITY; n],
+            vec![f64::INFINITY; n],
+            vec![f64::INFINITY; n],
+        ];
+        let mut touching = vec![false; n];
+        let mut work = vec![frcd_obb::Counters::default(); n];
+        for run in 0..4 {
+            let mut cache = PairCache::new();
+            for (k, f) in p.scene.frames.iter().enumerate() {
+                // Alternate which of plain and cached runs first (the second finds the data
+                // in the CPU caches).
+                let mut cached = || {
+                    let s = Instant::now();
+                    let c = collide_cached(ta, &f[0], tb, &f[1], &r, &mut cache);
+                    let e = s.elapsed().as_secs_f64();
+                    black_box(c);
+                    e
+                };
+                let e = if run % 2 == 1 { cached() } else { 0.0 };
+                let s = Instant::now();
+                let c = collide(ta, &f[0], tb, &f[1], &r);
+                t[0][k] = t[0][k].min(s.elapsed().as_secs_f64());
+                touching[k] = c.collide;
+                work[k] = c.counters;
+                black_box(c);
+                let e = if run % 2 == 0 { cached() } else { e };
+                t[1][k] = t[1][k].min(e);
+                let q = &p.poses64[k];
+                let s = Instant::now();
+                match mode {
+                    Mode::FirstContact => {
+                        black_box(p64::first_contact(&p.m64[0], &q[0], &p.m64[1], &q[1]));
+                    }
+                    Mode::AllPairs => {
+                        black_box(p64::all_pairs(&p.m64[0], &q[0], &p.m64[1], &q[1]));
+                    }
+                }
+                t[2][k] = t[2][k].min(s.elapsed().as_secs_f64());
+            }
+        }
+        let med = |i: usize, touch: bool| {
+            median(
+                (0..n)
+                    .filter(|&k| touching[k] == touch)
+                    .map(|k| t[i][k] * 1e6)
+                    .collect(),
+            )
+        };
+        let total = |i: usize| t[i].iter().sum::<f64>() * 1e3;
+        let sum_where = |touch: bool| {
+            let mut c = frcd_obb::Counters::default();
+            let mut secs = 0.0;
+            let mut m = 0;
+            for k in (0..n).filter(|&k| touching[k] == touch) {
+                c += work[k];
+                secs += t[0][k];
+                m += 1;
+            }
+            (c, secs, m.max(1) as f64)
+        };
+        let (cd, sd, nd) = sum_where(false);
+        let (ct, _, nt) = sum_where(true);
+        let label = match mode {
+            Mode::FirstContact => "first",
+            Mode::AllPairs => "all",
+        };
+        eprintln!(
+            "[split] {} {label}: steps disjoint {} touching {} | median us disjoint/touching: frcd {:.1}/{:.1}, cached {:.1}/{:.1}, parry3d-f64 {:.1}/{:.1} | total ms: frcd {:.2}, cached {:.2}, parry3d-f64 {:.2} | parry/frcd {:.2}x (best of frcd, cached {:.2}x) | frcd per query: disjoint {:.0} box {:.0} tri, touching {:.0} box {:.0} tri; {:.1} ns per box test (disjoint steps, all work)",
+            p.scene.name,
+            touching.iter().filter(|x| !**x).count(),
+            touching.iter().filter(|x| **x).count(),
+            med(0, false),
+            med(0, true),
+            med(1, false),
+            med(1, true),
+            med(2, false),
+            med(2, true),
+            total(0),
+            total(1),
+            total(2),
+            total(2) / total(0).min(total(1)),
+            total(1) / total(0),
+            cd.box_tests as f64 / nd,
+            cd.tri_tests as f64 / nd,
+            ct.box_tests as f64 / nt,
+            ct.tri_tests as f64 / nt,
+            sd * 1e9 / cd.box_tests.max(1) as f64,
+        );
+    }
+}
+
+fn pair_group(c: &mut Criterion, group: &str, p: &Pair) {
     let mut g = c.benchmark_group(format!("obb/{group}"));
     g.sample_size(10);
     for (mode, label) in [(Mode::FirstContact, "first"), (Mode::AllPairs, "all")] {
@@ -238,30 +330,13 @@ fn pair_group(c: &mut Criterion, group: &str, p: &Pair, coherence: bool) {
                 black_box(n)
             })
         });
-        if coherence {
-            g.bench_function(format!("frcd_{label}_cached"), |b| {
-                b.iter(|| {
-                    let mut cache = PairCache::new();
-                    let mut n = 0usize;
-                    for f in &p.scene.frames {
-                        let c =
-                            collide_cached(&p.frcd[0], &f[0], &p.frcd[1], &f[1], &r, &mut cache);
-                        n += c.pairs.len() + c.collide as usize;
-                    }
-                    black_box(n)
-                })
-            });
-        }
-        g.bench_function(format!("parry3d_{label}"), |b| {
+        g.bench_function(format!("frcd_{label}_cached"), |b| {
             b.iter(|| {
+                let mut cache = PairCache::new();
                 let mut n = 0usize;
-                for q in &p.poses32 {
-                    n += match mode {
-                        Mode::FirstContact => {
-                            p32::first_contact(&p.m32[0], &q[0], &p.m32[1], &q[1]) as usize
-                        }
-                        Mode::AllPairs => p32::all_pairs(&p.m32[0], &q[0], &p.m32[1], &q[1]).len(),
-                    };
+                for f in &p.scene.frames {
+                    let c = collide_cached(&p.frcd[0], &f[0], &p.frcd[1], &f[1], &r, &mut cache);
+                    n += c.pairs.len() + c.collide as usize;
                 }
                 black_box(n)
             })
@@ -284,12 +359,59 @@ fn pair_group(c: &mut Criterion, group: &str, p: &Pair, coherence: bool) {
     g.finish();
 }
 
+/// The real-mesh scenes (class 3), or nothing (SKIP printed) when `../shared/meshes` is absent.
+fn cad_scenes() -> Vec<Scene> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/meshes");
+    let load = |f: &str| frcd_io::load_mesh(dir.join(f)).ok().map(Arc::new);
+    let pairs = [
+        (
+            "cad_wagon_bogie",
+            "railway_3dprintedtrains/intermodal_wagon_no_visible_container_holes_binary.stl",
+            "railway_3dprintedtrains/bogie.stl",
+        ),
+        (
+            "cad_bogie_pair",
+            "railway_3dprintedtrains/bogie.stl",
+            "railway_3dprintedtrains/bogie.stl",
+        ),
+        (
+            "cad_fandisk_pair",
+            "mechanical_trimesh/fandisk.obj",
+            "mechanical_trimesh/fandisk.obj",
+        ),
+    ];
+    let mut out = Vec::new();
+    for (k, (name, fa, fb)) in pairs.into_iter().enumerate() {
+        let (Some(a), Some(b)) = (load(fa), load(fb)) else {
+            eprintln!(
+                "SKIP {name}: {fa} or {fb} not found under {}",
+                dir.display()
+            );
+            continue;
+        };
+        let (ta, tb) = (
+            ObbTree::build(&a, &BuildOptions::default()),
+            ObbTree::build(&b, &BuildOptions::default()),
+        );
+        let r = req(Mode::FirstContact);
+        out.push(scenes::random_near_contact(
+            name,
+            a,
+            b,
+            100,
+            0.01,
+            0xCAD0 + k as u64,
+            |pb| collide(&ta, &frcd_geom::Pose::IDENTITY, &tb, pb, &r).collide,
+        ));
+    }
+    out
+}
+
 fn bench_build(c: &mut Criterion) {
     let mut g = c.benchmark_group("obb/build");
     g.sample_size(10);
     let meshes = [
         ("icosphere_20k", frcd_geom::shapes::icosphere(1.0, 5)),
-        ("icosphere_80k", frcd_geom::shapes::icosphere(1.0, 6)),
         (
             "knot_50k",
             scenes::torus_knots(1040, 24, 1).bodies[0]
@@ -304,22 +426,6 @@ fn bench_build(c: &mut Criterion) {
         g.bench_function(format!("frcd_{name}"), |b| {
             b.iter(|| black_box(ObbTree::build(mesh, &BuildOptions::default())))
         });
-        for fit in [FitMethod::AreaWeighted, FitMethod::HullSurface] {
-            g.bench_function(format!("frcd_{fit:?}_{name}"), |b| {
-                b.iter(|| {
-                    black_box(ObbTree::build(
-                        mesh,
-                        &BuildOptions {
-                            fit,
-                            ..BuildOptions::default()
-                        },
-                    ))
-                })
-            });
-        }
-        g.bench_function(format!("parry3d_{name}"), |b| {
-            b.iter(|| black_box(p32::mesh(mesh)))
-        });
         g.bench_function(format!("parry3d_f64_{name}"), |b| {
             b.iter(|| black_box(p64::mesh(mesh)))
         });
@@ -330,20 +436,36 @@ fn bench_build(c: &mut Criterion) {
 fn bench_pairs(c: &mut Criterion) {
     let only = std::env::var("FRCD_BENCH_ONLY").unwrap_or_default();
     let want = |n: &str| only.is_empty() || only.split(',').any(|o| n.contains(o));
-    if want("spheres_l5") {
-        let p = prepare(scenes::icospheres_sweep(5, 200), FitMethod::default());
-        agreement(&p);
-        pair_group(c, "spheres_l5", &p, false);
+    // FRCD_BENCH_LEAF overrides the leaf size (to compare leaf sizes across the classes).
+    let mut opts = BuildOptions::default();
+    if let Some(leaf) = std::env::var("FRCD_BENCH_LEAF")
+        .ok()
+        .and_then(|v| v.parse().ok())
+    {
+        opts.max_leaf_triangles = leaf;
+        eprintln!("[leaf] max_leaf_triangles = {leaf}");
     }
-    if want("spheres_l6") {
-        let p = prepare(scenes::icospheres_sweep(6, 200), FitMethod::default());
-        agreement(&p);
-        pair_group(c, "spheres_l6", &p, false);
+    let mut list: Vec<(Scene, usize)> = Vec::new();
+    if want("dense") {
+        let mut s = scenes::icospheres_sweep(5, 200);
+        s.name = format!("dense_{}", s.name);
+        list.push((s, 4));
     }
-    if want("knots") {
-        let p = prepare(scenes::torus_knots(1040, 24, 500), FitMethod::default());
-        agreement(&p);
-        pair_group(c, "knots", &p, true);
+    if want("knots_near") {
+        list.push((scenes::knots_near_contact(500), 10));
+    }
+    if want("cad") {
+        list.extend(cad_scenes().into_iter().map(|s| (s, 2)));
+    }
+    if want("knots_slow") {
+        list.push((scenes::knots_slow_rotation(200), 10));
+    }
+    for (scene, stride) in list {
+        let name = scene.name.clone();
+        let p = prepare(scene, &opts);
+        agreement(&p, stride);
+        split(&p);
+        pair_group(c, &name, &p);
     }
 }
 

@@ -286,6 +286,90 @@ pub fn torus_knots_lifted(tubular: u32, radial: u32, steps: usize, lift: f64) ->
     }
 }
 
+/// Near contact, non-convex: [`torus_knots`] lifted to 1.42 tube diameters, so that about half
+/// the steps (292 of 500) are disjoint and the rest graze: the class where proving
+/// disjointness takes a deep traversal.
+pub fn knots_near_contact(steps: usize) -> Scene {
+    let mut s = torus_knots_lifted(1040, 24, steps, 1.42);
+    s.name = format!("knots_near_{}", s.bodies[0].mesh.triangle_count());
+    s
+}
+
+/// Slow coherent motion: the two knots of [`torus_knots`] (lift 1.40, grazing in places)
+/// with B turning steadily about z by 0.1 mrad and drifting 10 µm per step: the motion a
+/// coherence cache is for.
+pub fn knots_slow_rotation(steps: usize) -> Scene {
+    let params = TorusKnotParams {
+        tubular_segments: 1040,
+        radial_segments: 24,
+        ..TorusKnotParams::default()
+    };
+    let mesh = Arc::new(torus_knot(&params).expect("valid torus knot parameters"));
+    let lift = 2.0 * params.tube_radius * 1.40;
+    let frames = (0..steps)
+        .map(|k| {
+            let s = k as f64;
+            vec![
+                Pose::IDENTITY,
+                Pose::new(
+                    DVec3::new(1e-5 * s, 0.0, lift),
+                    DQuat::from_rotation_z(1e-4 * s),
+                ),
+            ]
+        })
+        .collect();
+    Scene {
+        name: format!("knots_slow_{}", mesh.triangle_count()),
+        bodies: vec![body("knot_a", &mesh, true), body("knot_b", &mesh, false)],
+        frames,
+    }
+}
+
+/// Two meshes at random relative rotations, B placed along a random direction from A at
+/// `contact · (1 + u)`, `u` uniform in `±spread`, where `contact` is the offset of first
+/// contact along that direction (found by the caller's `touches` bisection): incoherent poses
+/// near first contact, about half of them touching.
+pub fn random_near_contact(
+    name: &str,
+    a: Arc<TriMesh>,
+    b: Arc<TriMesh>,
+    steps: usize,
+    spread: f64,
+    seed: u64,
+    mut touches: impl FnMut(&Pose) -> bool,
+) -> Scene {
+    let ca = a.aabb().center();
+    let cb = b.aabb().center();
+    let reach = (a.aabb().max - a.aabb().min).length() + (b.aabb().max - b.aabb().min).length();
+    let mut rng = Rng::new(seed);
+    let mut frames = Vec::with_capacity(steps);
+    while frames.len() < steps {
+        let q = rng.rotation();
+        let d = rng.unit();
+        let pose = |s: f64| Pose::new(ca + d * s - q * cb, q);
+        // Bisection on the offset between touching (lo) and apart (hi).
+        let (mut lo, mut hi) = (0.0, reach);
+        if !touches(&pose(lo)) || touches(&pose(hi)) {
+            continue;
+        }
+        for _ in 0..40 {
+            let mid = 0.5 * (lo + hi);
+            if touches(&pose(mid)) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let u = rng.range(-spread, spread);
+        frames.push(vec![Pose::IDENTITY, pose(hi * (1.0 + u))]);
+    }
+    Scene {
+        name: name.to_string(),
+        bodies: vec![body("a", &a, false), body("b", &b, false)],
+        frames,
+    }
+}
+
 /// Angle of a tooth centre of a spur gear mesh about z (mod one pitch), from its tip vertices.
 fn tooth_phase(mesh: &TriMesh, teeth: u32) -> f64 {
     let rmax = mesh

@@ -68,6 +68,18 @@ pub struct Counters {
     pub box_tests: u64,
     /// Triangle-triangle tests (after the exact per-pair box check).
     pub tri_tests: u64,
+    /// B boxes mapped into A's frame (a 3x3 product each).
+    pub placements: u64,
+}
+
+impl Counters {
+    /// One time-free number for the work of a query, in units of about one box test: box tests
+    /// and placements count one, a triangle test four (the exact test costs about four box
+    /// tests). Used by the coherence cache's budget and by tests comparing cached and plain
+    /// queries.
+    pub fn work(&self) -> u64 {
+        self.top_tests / 4 + self.box_tests + self.placements + 4 * self.tri_tests
+    }
 }
 
 impl core::ops::AddAssign for Counters {
@@ -75,6 +87,7 @@ impl core::ops::AddAssign for Counters {
         self.top_tests += o.top_tests;
         self.box_tests += o.box_tests;
         self.tri_tests += o.tri_tests;
+        self.placements += o.placements;
     }
 }
 
@@ -108,9 +121,11 @@ pub struct Collision {
 /// operations, so the exact triangle test sees the same f64 coordinates in both.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RelativeFrame {
-    /// Rotation from B's frame to A's.
+    /// Rotation from B's frame to A's (internal: read it with [`RelativeFrame::rotation`]).
+    #[doc(hidden)]
     pub m: DMat3,
-    /// B's origin in A's frame.
+    /// B's origin in A's frame (internal: read it with [`RelativeFrame::translation`]).
+    #[doc(hidden)]
     pub t: DVec3,
 }
 
@@ -122,6 +137,16 @@ impl RelativeFrame {
             m: rel.rotation_matrix(),
             t: rel.translation,
         }
+    }
+
+    /// Rotation from B's frame to A's.
+    pub fn rotation(&self) -> DMat3 {
+        self.m
+    }
+
+    /// B's origin in A's frame.
+    pub fn translation(&self) -> DVec3 {
+        self.t
     }
 
     /// Maps a B-local point into A's frame.
@@ -151,33 +176,58 @@ pub(crate) fn query_slack(a: &ObbTree, b: &ObbTree, frame: &RelativeFrame) -> f6
     SLACK_REL * (a.radius_from_origin + b.radius_from_origin + frame.t.length())
 }
 
-/// One entry of a traversal front: a node pair where last query's recursion stopped.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// One entry of a traversal front: a node pair where a traversal stopped (the entries of a
+/// front are a cut of the traversal tree: every leaf pair lies below exactly one of them).
+#[derive(Clone, Copy, Debug, PartialEq)]
 struct FrontEntry {
     a: u32,
     b: u32,
-    /// Separating axis that culled the pair (`NONE` when the boxes overlapped: a leaf pair).
-    axis: u8,
+    /// [`SEPARATED`], [`OVERLAP`] (a leaf pair whose boxes overlapped) or [`UNTESTED`].
+    kind: u8,
+    /// For a separated pair: the pair stays separated while the cache's motion clock plus the
+    /// query's slack stays below this value (clock at the test + separation margin).
+    bound: f64,
 }
 
-const NONE: u8 = u8::MAX;
+const SEPARATED: u8 = 0;
+const OVERLAP: u8 = 1;
+const UNTESTED: u8 = 2;
 
 /// Caller-owned frame-to-frame state for [`collide_cached`] on one pair of trees.
 ///
-/// Holds the last witness triangle pair (tested first in [`Mode::FirstContact`]), the axis that
-/// last separated the root pair (tried first), and the traversal front of the last
-/// [`Mode::AllPairs`] query (generalized front tracking: the next query starts from these node
-/// pairs, descends where they overlap and pulls separated siblings up to their parent). The
-/// answers are the same as without a cache; only the work differs. A cache used with other
-/// trees resets itself.
+/// Holds the last witness triangle pair (tested first in [`Mode::FirstContact`]) and the
+/// traversal front of the last traversal: the node pairs where it stopped, each separated pair
+/// with its separation margin. Between queries the cache bounds how far any point of B moved
+/// in A's frame (`|Δt| + ‖ΔM‖_F · r_B`, summed into a motion clock); a separated front pair
+/// whose margin exceeds the motion since its test is still separated and is not tested again
+/// (the argument holds for the fixed separating direction, so it is exact, not a heuristic).
+/// The others are tested again and traversed below where they overlap; leaf pairs whose boxes
+/// overlapped get a box test before their triangle tests.
+///
+/// The cache never costs much: a work budget compares each front walk with the last fresh
+/// traversal ([`Counters::work`]); when the front costs more, the cache drops it and traverses
+/// afresh, backing off exponentially (up to 64 queries) before trying a front again, so
+/// incoherent sequences (random poses, teleports) run at the uncached speed. The answers are
+/// the same as without a cache; only the work differs. A cache used with other trees resets
+/// itself.
 #[derive(Clone, Debug, Default)]
 pub struct PairCache {
     key: (u64, u64),
     witness: Option<(u32, u32)>,
-    root_axis: Option<u8>,
     front: Vec<FrontEntry>,
     scratch: Vec<FrontEntry>,
-    queries: u64,
+    /// Frame of the previous query.
+    prev: Option<RelativeFrame>,
+    /// Sum of the motion bounds since the cache was bound.
+    clock: f64,
+    /// Work of the last fresh traversal.
+    fresh_work: u64,
+    /// Queries left to traverse afresh before the front is tried again.
+    skip: u32,
+    /// Length of the next back-off.
+    backoff: u32,
+    /// Motion bound of the last query (how far any point of B moved in A's frame).
+    delta: f64,
 }
 
 impl PairCache {
@@ -196,12 +246,28 @@ impl PairCache {
         self.front.len()
     }
 
-    fn bind(&mut self, a: &ObbTree, b: &ObbTree) {
+    fn bind(&mut self, a: &ObbTree, b: &ObbTree, frame: &RelativeFrame) {
         let key = (a.uid, b.uid);
         if key != self.key {
             self.clear();
             self.key = key;
         }
+        if let Some(p) = self.prev {
+            // A bound on |frame(p) - prev(p)| for every B-local point p, rounded up.
+            let dm = frame.m - p.m;
+            let fro = (dm.x_axis.length_squared()
+                + dm.y_axis.length_squared()
+                + dm.z_axis.length_squared())
+            .sqrt();
+            let delta = (frame.t - p.t).length() + fro * b.radius_from_origin;
+            self.delta = delta;
+            self.clock += delta * (1.0 + 1e-9);
+            if !self.clock.is_finite() {
+                self.front.clear();
+                self.clock = 0.0;
+            }
+        }
+        self.prev = Some(*frame);
     }
 }
 
@@ -245,26 +311,16 @@ impl<'a> Ctx<'a> {
     }
 
     #[inline]
-    fn place(&self, j: u32) -> Placed {
+    fn place(&mut self, j: u32) -> Placed {
+        self.counters.placements += 1;
         Placed::new(&self.b.nodes[j as usize].obb, &self.frame.m, self.frame.t)
     }
 
+    /// The separating axis and margin of node `i` of A against a placed box of B, if any.
     #[inline]
-    fn separating(&mut self, i: u32, j: u32, first: Option<u8>) -> Option<u8> {
-        let pb = self.place(j);
-        self.separating_placed(i, &pb, first)
-    }
-
-    #[inline]
-    fn separating_placed(&mut self, i: u32, pb: &Placed, first: Option<u8>) -> Option<u8> {
+    fn separation(&mut self, i: u32, pb: &Placed) -> Option<(u8, f64)> {
         self.counters.box_tests += 1;
-        sat::separating_axis(&self.a.nodes[i as usize].obb, pb, self.slack, first)
-    }
-
-    #[inline]
-    fn disjoint_placed(&mut self, i: u32, pb: &Placed) -> bool {
-        self.counters.box_tests += 1;
-        sat::disjoint(&self.a.nodes[i as usize].obb, pb, self.slack)
+        sat::separation(&self.a.nodes[i as usize].obb, pb, self.slack)
     }
 
     /// The two children of a node pair in the traversal tree (descend into the bigger box; a
@@ -323,45 +379,53 @@ impl<'a> Ctx<'a> {
     }
 
     /// Depth-first traversal below (and including) node pair `(i, j)`. Appends the pairs where
-    /// it stopped to `front` (when given); calls `hit` on touching triangle pairs and stops
-    /// everything when `hit` returns `true` (then returns `true`).
+    /// it stopped to `front` (when given; separated pairs with bound `clock + margin`); calls
+    /// `hit` on touching triangle pairs and stops everything when `hit` returns `true` (then
+    /// returns `true`, and the pairs it did not reach go to `front` as untested, so the front
+    /// stays a cut).
     fn descend(
         &mut self,
         i: u32,
         j: u32,
-        first_axis: u8,
         stack: &mut Vec<(u32, u32, Placed)>,
-        mut front: Option<&mut Vec<FrontEntry>>,
+        mut front: Option<(&mut Vec<FrontEntry>, f64)>,
         hit: &mut impl FnMut(u32, u32) -> bool,
     ) -> bool {
         let base = stack.len();
         // B's boxes travel with the stack mapped into A's frame: splitting A reuses them.
-        stack.push((i, j, self.place(j)));
-        let mut first = (first_axis != NONE).then_some(first_axis);
+        let pj = self.place(j);
+        stack.push((i, j, pj));
         while stack.len() > base {
             let (i, j, pj) = stack.pop().expect("non-empty");
-            let sep = if let Some(f) = &mut front {
-                let axis = self.separating_placed(i, &pj, first.take());
-                if let Some(axis) = axis {
-                    f.push(FrontEntry { a: i, b: j, axis });
-                    continue;
-                }
-                false
-            } else {
-                self.disjoint_placed(i, &pj)
-            };
-            if sep {
-                continue;
-            }
-            if self.both_leaves(i, j) {
-                if let Some(f) = &mut front {
+            if let Some((_, margin)) = self.separation(i, &pj) {
+                if let Some((f, clock)) = &mut front {
                     f.push(FrontEntry {
                         a: i,
                         b: j,
-                        axis: NONE,
+                        kind: SEPARATED,
+                        bound: *clock + margin,
+                    });
+                }
+                continue;
+            }
+            if self.both_leaves(i, j) {
+                if let Some((f, _)) = &mut front {
+                    f.push(FrontEntry {
+                        a: i,
+                        b: j,
+                        kind: OVERLAP,
+                        bound: f64::NEG_INFINITY,
                     });
                 }
                 if self.leaf_pair(i, j, hit) {
+                    if let Some((f, _)) = &mut front {
+                        f.extend(stack[base..].iter().map(|&(a, b, _)| FrontEntry {
+                            a,
+                            b,
+                            kind: UNTESTED,
+                            bound: f64::NEG_INFINITY,
+                        }));
+                    }
                     stack.truncate(base);
                     return true;
                 }
@@ -372,8 +436,10 @@ impl<'a> Ctx<'a> {
                 stack.push((r.0, r.1, pj));
                 stack.push((l.0, l.1, pj));
             } else {
-                stack.push((r.0, r.1, self.place(r.1)));
-                stack.push((l.0, l.1, self.place(l.1)));
+                let pr = self.place(r.1);
+                stack.push((r.0, r.1, pr));
+                let pl = self.place(l.1);
+                stack.push((l.0, l.1, pl));
             }
         }
         false
@@ -491,7 +557,7 @@ pub fn collide(
     match request.mode {
         Mode::FirstContact => {
             let mut w = None;
-            ctx.descend(0, 0, NONE, &mut stack, None, &mut |x, y| {
+            ctx.descend(0, 0, &mut stack, None, &mut |x, y| {
                 w = Some((x, y));
                 true
             });
@@ -499,7 +565,7 @@ pub fn collide(
         }
         Mode::AllPairs => {
             let pairs = &mut c.pairs;
-            ctx.descend(0, 0, NONE, &mut stack, None, &mut |x, y| {
+            ctx.descend(0, 0, &mut stack, None, &mut |x, y| {
                 pairs.push((x, y));
                 false
             });
@@ -510,8 +576,8 @@ pub fn collide(
 
 /// [`collide`] with frame-to-frame coherence: the same answer (`collide`, `pairs`, `contained`;
 /// in FirstContact mode the witness may be a different touching pair), less work when poses
-/// change little between calls. `cache` belongs to this pair of trees (it resets itself when
-/// given other trees).
+/// change little between calls, and about the same work when they do not (see [`PairCache`]).
+/// `cache` belongs to this pair of trees (it resets itself when given other trees).
 pub fn collide_cached(
     a: &ObbTree,
     pose_a: &Pose,
@@ -520,162 +586,171 @@ pub fn collide_cached(
     request: &Request,
     cache: &mut PairCache,
 ) -> Collision {
-    cache.bind(a, b);
     let mut ctx = Ctx::new(a, pose_a, b, pose_b, request.method);
+    cache.bind(a, b, &ctx.frame);
     let mut c = Collision::default();
-    match request.mode {
-        Mode::FirstContact => {
-            if let Some((x, y)) = cache.witness {
-                if ctx.tri_pair(x, y) {
-                    c.witness = Some((x, y));
-                    return finish(&ctx, request, c);
-                }
-                // The contact moved a little: try the triangles around the old witness.
-                let mut found = None;
-                'near: for &x2 in a.neighbours(x) {
-                    for &y2 in b.neighbours(y) {
-                        if ctx.tri_pair(x2, y2) {
-                            found = Some((x2, y2));
-                            break 'near;
-                        }
-                    }
-                }
-                if found.is_some() {
-                    c.witness = found;
-                    cache.witness = found;
-                    return finish(&ctx, request, c);
-                }
+    // Cheap rejections first: the top volume, then (first contact) the old witness pair.
+    if ctx.top_rejects(request.top_volume) {
+        cache.witness = None;
+        c.counters = ctx.counters;
+        return c;
+    }
+    let first = request.mode == Mode::FirstContact;
+    if first {
+        if let Some((x, y)) = cache.witness {
+            if ctx.tri_pair(x, y) {
+                c.witness = Some((x, y));
+                return finish(&ctx, request, c);
             }
-            if ctx.top_rejects(request.top_volume) {
-                cache.witness = None;
-                c.counters = ctx.counters;
-                return c;
-            }
-            let axis = ctx.separating(0, 0, cache.root_axis);
-            cache.root_axis = axis;
-            if axis.is_none() {
-                let mut w = None;
-                let mut stack = Vec::with_capacity(64);
-                // The root pair overlaps: start from its children.
-                if ctx.both_leaves(0, 0) {
-                    ctx.leaf_pair(0, 0, &mut |x, y| {
-                        w = Some((x, y));
-                        true
-                    });
-                } else {
-                    for (i, j) in ctx.children(0, 0) {
-                        if ctx.descend(i, j, NONE, &mut stack, None, &mut |x, y| {
-                            w = Some((x, y));
-                            true
-                        }) {
-                            break;
-                        }
-                    }
-                }
-                c.witness = w;
-            }
-            cache.witness = c.witness;
         }
-        Mode::AllPairs => {
-            if ctx.top_rejects(request.top_volume) {
-                c.counters = ctx.counters;
-                return c;
-            }
-            let mut old = std::mem::take(&mut cache.front);
-            if old.is_empty() {
-                old.push(FrontEntry {
-                    a: 0,
-                    b: 0,
-                    axis: cache.root_axis.unwrap_or(NONE),
-                });
-            }
-            let mut new = std::mem::take(&mut cache.scratch);
-            new.clear();
-            let pairs = &mut c.pairs;
-            cache.queries += 1;
-            // Pulling separated siblings up costs a test of their parent, wasted when the parent
-            // still overlaps; try it on every fourth query only.
-            let pull_up = cache.queries % 4 == 1;
-            walk_front(&mut ctx, &old, &mut new, pull_up, &mut |x, y| {
-                pairs.push((x, y));
-                false
-            });
-            cache.root_axis = match new.as_slice() {
-                [e] if e.a == 0 && e.b == 0 && e.axis != NONE => Some(e.axis),
-                _ => None,
-            };
-            cache.front = new;
-            cache.scratch = old;
+    }
+    let mut found = None;
+    // A front only pays when the bodies moved by a small part of their size since the last
+    // query: after larger motion (random poses, teleports) every margin has expired, so the
+    // cache neither walks nor records a front.
+    let coherent = cache.delta <= 0.1 * a.sphere.radius.min(b.sphere.radius);
+    let mut use_front = coherent && !cache.front.is_empty() && cache.skip == 0;
+    if use_front {
+        let mut old = std::mem::take(&mut cache.front);
+        let mut new = std::mem::take(&mut cache.scratch);
+        new.clear();
+        let before = ctx.counters.work();
+        // The walk may spend at most half a fresh traversal: a stale front is abandoned early.
+        let budget = cache.fresh_work / 2;
+        let mut hit = hit_fn(first, &mut found, &mut c.pairs);
+        let done = walk_front(
+            &mut ctx,
+            &old,
+            &mut new,
+            cache.clock,
+            first,
+            budget,
+            &mut hit,
+        );
+        drop(hit);
+        let work = ctx.counters.work() - before + old.len() as u64 / 8;
+        old.clear();
+        cache.front = new;
+        cache.scratch = old;
+        if !done || 10 * work > 9 * cache.fresh_work {
+            // The front saved less than a tenth of a fresh traversal: drop it and back off.
+            cache.front.clear();
+            cache.backoff = (cache.backoff * 2).clamp(1, 64);
+            cache.skip = cache.backoff;
+        } else {
+            cache.backoff = 0;
         }
+        if !done {
+            // Abandoned half way: start again from the root (the pairs found so far would be
+            // found again).
+            c.pairs.clear();
+            found = None;
+            use_front = false;
+        }
+    }
+    if !use_front {
+        cache.skip = cache.skip.saturating_sub(1);
+        // Record a front only when the next query will try it.
+        let record = coherent && cache.skip == 0;
+        let mut front = std::mem::take(&mut cache.front);
+        front.clear();
+        let before = ctx.counters.work();
+        let mut stack = Vec::with_capacity(64);
+        let mut hit = hit_fn(first, &mut found, &mut c.pairs);
+        ctx.descend(
+            0,
+            0,
+            &mut stack,
+            record.then_some((&mut front, cache.clock)),
+            &mut hit,
+        );
+        // A running mean: a first-contact traversal's work varies with where the hit is.
+        let work = ctx.counters.work() - before;
+        cache.fresh_work = if cache.fresh_work == 0 {
+            work
+        } else {
+            (3 * cache.fresh_work + work) / 4
+        };
+        cache.front = front;
+    }
+    if first {
+        c.witness = found;
+        cache.witness = found;
     }
     finish(&ctx, request, c)
 }
 
-/// Walks the traversal tree from the root down to the old front (a cut of the traversal tree,
-/// in depth-first order) without testing the pairs above it, runs the ordinary traversal from
-/// each front pair, and builds the new front; two separated sibling entries are replaced by
-/// their parent when the parent is separated too. Every leaf pair under the root is reached
-/// exactly once whatever `old` holds, so the answer never depends on the cache.
+/// The hit callback of a cached query: first contact stores the pair and stops, all pairs
+/// collects them.
+fn hit_fn<'a>(
+    first: bool,
+    found: &'a mut Option<(u32, u32)>,
+    pairs: &'a mut Vec<(u32, u32)>,
+) -> impl FnMut(u32, u32) -> bool + 'a {
+    move |x, y| {
+        if first {
+            *found = Some((x, y));
+            true
+        } else {
+            pairs.push((x, y));
+            false
+        }
+    }
+}
+
+/// Runs the query on the old front (a cut of the traversal tree) and builds the new one:
+/// separated pairs whose margin still exceeds the motion since their test are kept untested;
+/// the others are traversed afresh from where they are. In first-contact mode the leaf pairs
+/// whose boxes overlapped last time go first, and after a hit the entries not reached are
+/// kept as they are. Every leaf pair is covered exactly once whatever `old` holds, so the
+/// answer never depends on the cache. Returns `false` (the walk abandoned, its results
+/// incomplete) as soon as the walk's work exceeds `budget`.
 fn walk_front(
     ctx: &mut Ctx<'_>,
     old: &[FrontEntry],
     new: &mut Vec<FrontEntry>,
-    pull_up: bool,
+    clock: f64,
+    first: bool,
+    budget: u64,
     hit: &mut impl FnMut(u32, u32) -> bool,
-) {
-    enum Step {
-        Visit(u32, u32),
-        Post(u32, u32, usize),
-    }
-    let mut k = 0usize;
-    let mut steps = vec![Step::Visit(0, 0)];
+) -> bool {
+    let start = ctx.counters.work();
     let mut stack = Vec::with_capacity(64);
-    while let Some(step) = steps.pop() {
-        match step {
-            Step::Visit(i, j) => {
-                if k < old.len() && old[k].a == i && old[k].b == j {
-                    let axis = old[k].axis;
-                    k += 1;
-                    if axis == NONE && ctx.both_leaves(i, j) {
-                        // A leaf pair whose boxes overlapped last time: test the triangles
-                        // straight away (exact, so the box test is only a filter); classify the
-                        // boxes only when nothing touches, for the pull-up.
-                        let mut any = false;
-                        ctx.leaf_pair(i, j, &mut |x, y| {
-                            any = true;
-                            hit(x, y)
-                        });
-                        let axis = if any {
-                            NONE
-                        } else {
-                            ctx.separating(i, j, None).unwrap_or(NONE)
-                        };
-                        new.push(FrontEntry { a: i, b: j, axis });
-                        continue;
-                    }
-                    ctx.descend(i, j, axis, &mut stack, Some(new), hit);
-                } else if ctx.both_leaves(i, j) {
-                    ctx.descend(i, j, NONE, &mut stack, Some(new), hit);
-                } else {
-                    steps.push(Step::Post(i, j, new.len()));
-                    let [l, r] = ctx.children(i, j);
-                    steps.push(Step::Visit(r.0, r.1));
-                    steps.push(Step::Visit(l.0, l.1));
-                }
+    let limit = clock + ctx.slack;
+    let passes: &[Option<u8>] = if first {
+        &[Some(OVERLAP), None]
+    } else {
+        &[None]
+    };
+    for (p, &pass) in passes.iter().enumerate() {
+        for (k, e) in old.iter().enumerate() {
+            // Pass 0 of first contact: overlapping leaf pairs only; the last pass: the rest.
+            match pass {
+                Some(kind) if e.kind != kind => continue,
+                None if first && e.kind == OVERLAP => continue,
+                _ => {}
             }
-            Step::Post(i, j, len) => {
-                if pull_up
-                    && new.len() == len + 2
-                    && new[len].axis != NONE
-                    && new[len + 1].axis != NONE
-                {
-                    let first = new[len].axis;
-                    if let Some(axis) = ctx.separating(i, j, Some(first)) {
-                        new.truncate(len);
-                        new.push(FrontEntry { a: i, b: j, axis });
+            if e.kind == SEPARATED && limit < e.bound {
+                new.push(*e);
+                continue;
+            }
+            if ctx.counters.work() - start > budget {
+                return false;
+            }
+            if ctx.descend(e.a, e.b, &mut stack, Some((new, clock)), hit) {
+                // First contact found: keep every entry not reached yet.
+                let rest = old.iter().enumerate().filter(|&(k2, e2)| {
+                    let overlap = e2.kind == OVERLAP;
+                    if p == 0 && first {
+                        k2 > k || !overlap
+                    } else {
+                        k2 > k && !(first && overlap)
                     }
-                }
+                });
+                new.extend(rest.map(|(_, e2)| *e2));
+                return true;
             }
         }
     }
+    true
 }

@@ -36,81 +36,67 @@ impl Placed {
     }
 }
 
-struct Setup {
-    r: [[f64; 3]; 3],
-    ar: [[f64; 3]; 3],
-    t: [f64; 3],
-    a: [f64; 3],
-    b: [f64; 3],
-}
-
+/// The separating axis (0..15: A's faces, B's faces, then edge pairs `3·i + j`) and the
+/// margin by which it separates (`|projected offset| - (radii + slack)`, > 0), or `None` when
+/// no axis separates the boxes by more than `slack`.
+///
+/// The relative rotation is computed one row at a time: a pair separated by one of A's face
+/// axes, the common case deep in a traversal, costs a fraction of the full 15-axis setup.
+/// For a cross axis the margin is measured along the unnormalised `a_i × b_j` (length ≤ 1), so
+/// it never exceeds the true gap.
 #[inline(always)]
-fn setup(a: &Obb, b: &Placed) -> Setup {
-    let at = a.axes.transpose();
-    let rm = at * b.axes; // column j = A^T B_j, so R[i][j] = rm.col(j)[i]
-    let tv = at * (b.center - a.center);
-    let c = [rm.x_axis, rm.y_axis, rm.z_axis];
-    let mut r = [[0.0; 3]; 3];
-    let mut ar = [[0.0; 3]; 3];
+pub(crate) fn separation(a: &Obb, b: &Placed, slack: f64) -> Option<(u8, f64)> {
+    let ax = [a.axes.x_axis, a.axes.y_axis, a.axes.z_axis];
+    let bx = [b.axes.x_axis, b.axes.y_axis, b.axes.z_axis];
+    let d = b.center - a.center;
+    let ah = a.half_extents.to_array();
+    let bh = b.half.to_array();
+    let mut r = [[0.0f64; 3]; 3];
+    let mut ar = [[0.0f64; 3]; 3];
+    let mut t = [0.0f64; 3];
     for i in 0..3 {
+        let ai = ax[i];
+        t[i] = ai.x * d.x + ai.y * d.y + ai.z * d.z;
         for j in 0..3 {
-            r[i][j] = c[j][i];
-            ar[i][j] = c[j][i].abs() + EPS_R;
+            let bj = bx[j];
+            r[i][j] = ai.x * bj.x + ai.y * bj.y + ai.z * bj.z;
+            ar[i][j] = r[i][j].abs() + EPS_R;
+        }
+        let m =
+            t[i].abs() - (ah[i] + bh[0] * ar[i][0] + bh[1] * ar[i][1] + bh[2] * ar[i][2] + slack);
+        if m > 0.0 {
+            return Some((i as u8, m));
         }
     }
-    Setup {
-        r,
-        ar,
-        t: tv.to_array(),
-        a: a.half_extents.to_array(),
-        b: b.half.to_array(),
+    for j in 0..3 {
+        let m = (t[0] * r[0][j] + t[1] * r[1][j] + t[2] * r[2][j]).abs()
+            - (ah[0] * ar[0][j] + ah[1] * ar[1][j] + ah[2] * ar[2][j] + bh[j] + slack);
+        if m > 0.0 {
+            return Some((3 + j as u8, m));
+        }
     }
-}
-
-#[inline(always)]
-fn axis(s: &Setup, k: u8, slack: f64) -> bool {
-    let (r, ar, t, a, b) = (&s.r, &s.ar, &s.t, &s.a, &s.b);
-    match k {
-        0..=2 => {
-            let i = k as usize;
-            t[i].abs() > a[i] + b[0] * ar[i][0] + b[1] * ar[i][1] + b[2] * ar[i][2] + slack
-        }
-        3..=5 => {
-            let j = (k - 3) as usize;
-            (t[0] * r[0][j] + t[1] * r[1][j] + t[2] * r[2][j]).abs()
-                > a[0] * ar[0][j] + a[1] * ar[1][j] + a[2] * ar[2][j] + b[j] + slack
-        }
-        _ => {
-            let i = ((k - 6) / 3) as usize;
-            let j = ((k - 6) % 3) as usize;
-            let (i1, i2) = ((i + 1) % 3, (i + 2) % 3);
+    for i in 0..3 {
+        let (i1, i2) = ((i + 1) % 3, (i + 2) % 3);
+        for j in 0..3 {
             let (j1, j2) = ((j + 1) % 3, (j + 2) % 3);
-            (t[i2] * r[i1][j] - t[i1] * r[i2][j]).abs()
-                > a[i1] * ar[i2][j]
-                    + a[i2] * ar[i1][j]
-                    + b[j1] * ar[i][j2]
-                    + b[j2] * ar[i][j1]
-                    + slack
+            let m = (t[i2] * r[i1][j] - t[i1] * r[i2][j]).abs()
+                - (ah[i1] * ar[i2][j]
+                    + ah[i2] * ar[i1][j]
+                    + bh[j1] * ar[i][j2]
+                    + bh[j2] * ar[i][j1]
+                    + slack);
+            if m > 0.0 {
+                return Some((6 + (3 * i + j) as u8, m));
+            }
         }
     }
+    None
 }
 
 /// True when some axis separates the boxes by more than the error bound.
-#[inline]
-pub(crate) fn disjoint(a: &Obb, b: &Placed, slack: f64) -> bool {
-    let s = setup(a, b);
-    (0..15u8).any(|k| axis(&s, k, slack))
-}
-
-/// Like [`disjoint`], trying `first` before the others; returns the separating axis (0..15).
-pub(crate) fn separating_axis(a: &Obb, b: &Placed, slack: f64, first: Option<u8>) -> Option<u8> {
-    let s = setup(a, b);
-    if let Some(f) = first.filter(|f| *f < 15) {
-        if axis(&s, f, slack) {
-            return Some(f);
-        }
-    }
-    (0..15u8).find(|&k| Some(k) != first && axis(&s, k, slack))
+#[cfg(test)]
+fn disjoint(a: &Obb, b: &Placed, slack: f64) -> bool {
+    separation(a, b, slack).is_some()
 }
 
 #[cfg(test)]
@@ -138,15 +124,10 @@ mod tests {
             &Placed::new(&b, &m, DVec3::new(1e-6, 0.0, 0.0)),
             slack
         ));
-        assert_eq!(
-            separating_axis(
-                &a,
-                &Placed::new(&b, &m, DVec3::new(1e-6, 0.0, 0.0)),
-                slack,
-                None
-            ),
-            Some(0)
-        );
+        let (axis, margin) =
+            separation(&a, &Placed::new(&b, &m, DVec3::new(1e-6, 0.0, 0.0)), slack).unwrap();
+        assert_eq!(axis, 0);
+        assert!(margin > 0.0 && margin < 1e-6, "{margin}");
     }
 
     #[test]

@@ -9,12 +9,16 @@ use frcd_geom::{Aabb, DMat3, DVec3, Obb, Sphere, TriMesh, Triangle};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Node {
     /// The node's box, in the mesh's local frame.
+    #[doc(hidden)]
     pub obb: Obb,
     /// Index of the right child (internal nodes); unused (0) in leaves.
+    #[doc(hidden)]
     pub right: u32,
     /// First entry in the triangle order (leaves).
+    #[doc(hidden)]
     pub first: u32,
     /// Number of triangles (0 for internal nodes).
+    #[doc(hidden)]
     pub count: u32,
 }
 
@@ -37,7 +41,10 @@ pub struct BuildOptions {
     /// `obb/build`; see the crate README).
     pub fit: FitMethod,
     /// Most triangles in a leaf (a node with at most this many triangles becomes a leaf).
-    /// `0` is treated as `1`.
+    /// `0` is treated as `1`. The default, 1, was measured against 2 and 4 on every bench class
+    /// (`FRCD_BENCH_LEAF`, see the crate README): 1 was fastest or within noise on the dense
+    /// sweep and the real CAD pairs (leaf 4 was 1.6-2.5× slower on the wagon/bogie pairs), 2
+    /// about 25 % faster on the near-contact knots; larger leaves save memory and build time.
     pub max_leaf_triangles: u32,
 }
 
@@ -72,11 +79,6 @@ pub struct ObbTree {
     pub(crate) component_points: Vec<DVec3>,
     /// Identity of this build (clones share it: same structure), for caches.
     pub(crate) uid: u64,
-    /// The mesh's vertex indices per triangle (for the neighbourhood of a witness).
-    pub(crate) indices: Vec<[u32; 3]>,
-    /// Triangles sharing a vertex with each triangle (CSR: offsets, then ids), built on first
-    /// use by the coherence cache.
-    pub(crate) neighbours: std::sync::OnceLock<(Vec<u32>, Vec<u32>)>,
     /// Every edge has an even number of incident triangles (parity tests are meaningful).
     pub(crate) closed: bool,
 }
@@ -149,8 +151,6 @@ impl ObbTree {
             component_points: component_points(mesh),
             closed: mesh.topology().is_closed(),
             uid: NEXT_UID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
-            indices: mesh.indices().to_vec(),
-            neighbours: std::sync::OnceLock::new(),
         }
     }
 
@@ -222,57 +222,22 @@ impl ObbTree {
         self.triangles[tri as usize]
     }
 
-    /// Triangles sharing a vertex with triangle `t` (itself included).
-    pub(crate) fn neighbours(&self, t: u32) -> &[u32] {
-        let (offsets, ids) = self.neighbours.get_or_init(|| {
-            let nv = self
-                .indices
-                .iter()
-                .flatten()
-                .copied()
-                .max()
-                .map_or(0, |m| m as usize + 1);
-            // vertex -> triangles
-            let mut vcount = vec![0u32; nv + 1];
-            for tri in &self.indices {
-                for &v in tri {
-                    vcount[v as usize + 1] += 1;
-                }
-            }
-            for i in 0..nv {
-                vcount[i + 1] += vcount[i];
-            }
-            let mut fill = vcount.clone();
-            let mut vtris = vec![0u32; vcount[nv] as usize];
-            for (t, tri) in self.indices.iter().enumerate() {
-                for &v in tri {
-                    vtris[fill[v as usize] as usize] = t as u32;
-                    fill[v as usize] += 1;
-                }
-            }
-            let mut offsets = Vec::with_capacity(self.indices.len() + 1);
-            let mut ids = Vec::new();
-            offsets.push(0u32);
-            for tri in &self.indices {
-                let start = ids.len();
-                for &v in tri {
-                    let (lo, hi) = (vcount[v as usize] as usize, vcount[v as usize + 1] as usize);
-                    ids.extend_from_slice(&vtris[lo..hi]);
-                }
-                ids[start..].sort_unstable();
-                let mut w = start;
-                for r in start..ids.len() {
-                    if r == start || ids[r] != ids[w - 1] {
-                        ids[w] = ids[r];
-                        w += 1;
-                    }
-                }
-                ids.truncate(w);
-                offsets.push(ids.len() as u32);
-            }
-            (offsets, ids)
-        });
-        &ids[offsets[t as usize] as usize..offsets[t as usize + 1] as usize]
+    /// Heap and inline bytes held by the tree (nodes, triangle copies, leaf order, component
+    /// points), not counting the mesh it was built from: divide by the triangle count for the
+    /// per-triangle cost reported in the crate README.
+    ///
+    /// ```
+    /// use frcd_obb::{BuildOptions, ObbTree};
+    /// let mesh = frcd_geom::shapes::icosphere(1.0, 3);
+    /// let tree = ObbTree::build(&mesh, &BuildOptions::default());
+    /// assert!(tree.memory_bytes() > 72 * mesh.triangle_count());
+    /// ```
+    pub fn memory_bytes(&self) -> usize {
+        std::mem::size_of::<Self>()
+            + self.nodes.capacity() * std::mem::size_of::<Node>()
+            + self.order.capacity() * std::mem::size_of::<u32>()
+            + self.triangles.capacity() * std::mem::size_of::<Triangle>()
+            + self.component_points.capacity() * std::mem::size_of::<DVec3>()
     }
 
     /// Depth of the tree (a single leaf has depth 1).

@@ -223,25 +223,103 @@ fn cached_answers_equal_uncached_over_long_sequences() {
     }
 }
 
-#[test]
-fn coherent_front_does_less_box_work() {
-    let a = shapes::icosphere(1.0, 4);
-    let ta = ObbTree::build(&a, &BuildOptions::default());
-    let req = all_pairs();
+/// Work (box tests, placements, triangle tests: `Counters::work`) of plain and cached queries
+/// over a sequence, after the first step; checks equal answers on the way.
+fn work_of(
+    ta: &ObbTree,
+    tb: &ObbTree,
+    poses: &[(Pose, Pose)],
+    req: &Request,
+) -> (u64, u64, PairCache) {
     let mut cache = PairCache::new();
     let (mut plain_work, mut cached_work) = (0, 0);
-    for step in 0..50 {
-        let pb = Pose::from_translation(DVec3::new(1.5 + 1e-3 * step as f64, 0.0, 0.0));
-        let p = collide(&ta, &Pose::IDENTITY, &ta, &pb, &req);
-        let c = collide_cached(&ta, &Pose::IDENTITY, &ta, &pb, &req, &mut cache);
-        assert_eq!(p.pairs, c.pairs);
+    for (step, (pa, pb)) in poses.iter().enumerate() {
+        let p = collide(ta, pa, tb, pb, req);
+        let c = collide_cached(ta, pa, tb, pb, req, &mut cache);
+        assert_eq!(p.pairs, c.pairs, "step {step}");
+        assert_eq!(p.collide, c.collide, "step {step}");
         if step > 0 {
-            plain_work += p.counters.box_tests;
-            cached_work += c.counters.box_tests;
+            plain_work += p.counters.work();
+            cached_work += c.counters.work();
         }
     }
-    assert!(cached_work < plain_work, "{cached_work} vs {plain_work}");
-    assert!(cache.front_len() > 0);
+    (plain_work, cached_work, cache)
+}
+
+#[test]
+fn coherent_front_does_less_work() {
+    // Slow coherent motion, both modes: at least 3x less work (box tests, placements and
+    // triangle tests together), touching and apart.
+    // A: a torus; B: a small sphere touching the tube from above, or resting in the hole
+    // (apart, but inside every top volume and root box, so proving it takes a traversal).
+    let a = shapes::torus(1.0, 0.3, 48, 16).unwrap();
+    let b = shapes::icosphere(0.5, 3);
+    let (ta, tb) = (
+        ObbTree::build(&a, &BuildOptions::default()),
+        ObbTree::build(&b, &BuildOptions::default()),
+    );
+    for (start, label) in [
+        (DVec3::new(1.0, 0.0, 0.6), "touching"),
+        (DVec3::ZERO, "apart"),
+    ] {
+        let poses: Vec<(Pose, Pose)> = (0..50)
+            .map(|step| {
+                let s = step as f64;
+                (
+                    Pose::IDENTITY,
+                    Pose::new(
+                        start + DVec3::new(1e-5 * s, 0.0, 0.0),
+                        DQuat::from_rotation_z(1e-4 * s),
+                    ),
+                )
+            })
+            .collect();
+        let touching = collide(&ta, &poses[0].0, &tb, &poses[0].1, &Request::default()).collide;
+        assert_eq!(touching, label == "touching");
+        for mode in [Mode::FirstContact, Mode::AllPairs] {
+            let req = Request {
+                mode,
+                ..Request::default()
+            };
+            let (plain, cached, cache) = work_of(&ta, &tb, &poses, &req);
+            eprintln!("{label} {mode:?}: work plain {plain}, cached {cached}");
+            assert!(
+                3 * cached <= plain,
+                "{label} {mode:?}: cached work {cached} vs plain {plain}"
+            );
+            if mode == Mode::AllPairs {
+                assert!(cache.front_len() > 0);
+            }
+        }
+    }
+}
+
+#[test]
+fn cache_never_costs_on_incoherent_motion() {
+    // Random poses near contact and teleports: the cache's budget keeps its work within 1.1x
+    // of the plain query's (time-free counts, so this is not a timed test).
+    let a = shapes::icosphere(1.0, 3);
+    let b = shapes::torus(1.0, 0.3, 24, 12).unwrap();
+    let (ta, tb) = (
+        ObbTree::build(&a, &BuildOptions::default()),
+        ObbTree::build(&b, &BuildOptions::default()),
+    );
+    let mut rng = StdRng::seed_from_u64(77);
+    let poses: Vec<(Pose, Pose)> = (0..300)
+        .map(|_| (random_pose(&mut rng, 0.3), random_pose(&mut rng, 1.4)))
+        .collect();
+    for mode in [Mode::FirstContact, Mode::AllPairs] {
+        let req = Request {
+            mode,
+            ..Request::default()
+        };
+        let (plain, cached, _) = work_of(&ta, &tb, &poses, &req);
+        eprintln!("random poses {mode:?}: work plain {plain}, cached {cached}");
+        assert!(
+            10 * cached <= 11 * plain,
+            "{mode:?}: cached work {cached} vs plain {plain}"
+        );
+    }
 }
 
 #[test]
