@@ -19,7 +19,7 @@
 //! ```
 
 use crate::query::RelativeFrame;
-use frcd_geom::{DVec3, Pose, TriMesh, Triangle};
+use frcd_geom::{Aabb, DVec3, Pose, TriMesh, Triangle};
 use num_bigint::BigInt;
 use num_rational::BigRational;
 use num_traits::{One, Signed, Zero};
@@ -165,15 +165,23 @@ pub fn closest_points_triangles(a: &Triangle, b: &Triangle) -> (f64, DVec3, DVec
     best
 }
 
-/// Distance between two meshes at two poses, every triangle pair evaluated (B mapped into A's
-/// frame as in [`crate::collide`]). `O(n_a · n_b)`: for tests and `cargo xtask verify`.
+/// Distance between two meshes at two poses, every triangle pair considered (B mapped into A's
+/// frame as in [`crate::collide`]). A pair whose triangles' axis-aligned boxes are farther apart
+/// than the best distance so far is skipped: the box gap is a lower bound of the pair's
+/// distance (computed from exact box coordinates, shrunk by `1e-9` relative for rounding), so
+/// skipping never changes the answer. `O(n_a · n_b)`: for tests and `cargo xtask verify`.
 pub fn distance(a: &TriMesh, pose_a: &Pose, b: &TriMesh, pose_b: &Pose) -> OracleDistance {
     let frame = RelativeFrame::new(pose_a, pose_b);
     let ta: Vec<Triangle> = a.triangles().collect();
     let tb: Vec<Triangle> = b.triangles().map(|t| frame.triangle(&t)).collect();
+    let ba: Vec<Aabb> = ta.iter().map(|t| t.aabb()).collect();
+    let bb: Vec<Aabb> = tb.iter().map(|t| t.aabb()).collect();
     let mut best = (f64::INFINITY, (0u32, 0u32), DVec3::NAN, DVec3::NAN);
     'outer: for (i, x) in ta.iter().enumerate() {
         for (j, y) in tb.iter().enumerate() {
+            if box_gap(&ba[i], &bb[j]) > best.0 {
+                continue;
+            }
             let (d, p, q) = closest_points_triangles(x, y);
             if d < best.0 {
                 best = (d, (i as u32, j as u32), p, q);
@@ -191,6 +199,12 @@ pub fn distance(a: &TriMesh, pose_a: &Pose, b: &TriMesh, pose_b: &Pose) -> Oracl
             pose_a.transform_point(best.3),
         ],
     }
+}
+
+/// A lower bound on the distance between two axis-aligned boxes.
+fn box_gap(a: &Aabb, b: &Aabb) -> f64 {
+    let g = (b.min - a.max).max(a.min - b.max).max(DVec3::ZERO);
+    g.length() * (1.0 - 1e-9)
 }
 
 // --- Exact labels ---------------------------------------------------------------------------
@@ -369,9 +383,9 @@ pub fn triangles_distance2_exact(a: &Triangle, b: &Triangle) -> BigRational {
 }
 
 /// Exact label for [`crate::distance::within`]: every triangle pair (B mapped into A's frame as
-/// the tree query does), a float prefilter that only skips pairs whose float distance exceeds
-/// `tol` by a wide margin (`1e-6` relative to the pair's size), and [`triangles_within_exact`]
-/// on the rest. Slow; for tests, verify and stress.
+/// the tree query does), skipping pairs whose boxes are farther apart than `tol` or whose float
+/// distance exceeds `tol` by a wide margin (`1e-6` relative to the pair's size), and
+/// [`triangles_within_exact`] on the rest. Slow; for tests, verify and stress.
 pub fn within_exact(a: &TriMesh, pose_a: &Pose, b: &TriMesh, pose_b: &Pose, tol: f64) -> bool {
     if tol.is_nan() || tol < 0.0 {
         return false;
@@ -379,8 +393,13 @@ pub fn within_exact(a: &TriMesh, pose_a: &Pose, b: &TriMesh, pose_b: &Pose, tol:
     let frame = RelativeFrame::new(pose_a, pose_b);
     let ta: Vec<Triangle> = a.triangles().collect();
     let tb: Vec<Triangle> = b.triangles().map(|t| frame.triangle(&t)).collect();
+    let bb: Vec<Aabb> = tb.iter().map(|t| t.aabb()).collect();
     for x in &ta {
-        for y in &tb {
+        let bx = x.aabb();
+        for (y, by) in tb.iter().zip(&bb) {
+            if box_gap(&bx, by) > tol {
+                continue;
+            }
             let (d, _, _) = closest_points_triangles(x, y);
             let size =
                 x.v.iter()
@@ -414,4 +433,23 @@ pub fn distance2_exact(a: &TriMesh, pose_a: &Pose, b: &TriMesh, pose_b: &Pose) -
         }
     }
     best.unwrap_or_else(|| Q::from_integer(BigInt::from(-1)))
+}
+
+/// The exact distance of two triangles (same frame), rounded to f64 (from the exact rational
+/// square, scaled by a power of two so that tiny and subnormal distances keep their digits; the
+/// result is within a couple of ulps of the exact distance).
+pub fn triangles_distance_exact(a: &Triangle, b: &Triangle) -> f64 {
+    use num_traits::ToPrimitive;
+    let d2 = triangles_distance2_exact(a, b);
+    if d2.is_zero() {
+        return 0.0;
+    }
+    let approx = d2.to_f64().unwrap_or(f64::INFINITY);
+    if approx > 1e-200 {
+        return approx.sqrt();
+    }
+    // d = sqrt(d2 · 2^1200) · 2^-600, exact scaling by powers of two.
+    let scale = Q::from_integer(BigInt::from(1) << 1200usize);
+    let scaled = (d2 * scale).to_f64().unwrap_or(0.0);
+    scaled.sqrt() * f64::from_bits(((1023 - 600) as u64) << 52)
 }

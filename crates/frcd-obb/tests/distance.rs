@@ -1,7 +1,9 @@
 //! `frcd_obb::distance` against the brute-force oracle and exact labels.
 
 use frcd_geom::{DQuat, DVec3, Pose, TriMesh, shapes};
-use frcd_obb::distance::{DistanceRequest, distance, within, within_counted};
+use frcd_obb::distance::{
+    DistanceCache, DistanceRequest, distance, distance_cached, within, within_counted,
+};
 use frcd_obb::{BuildOptions, ObbTree, oracle};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -216,4 +218,31 @@ fn within_handles_odd_tolerances_and_counts_work() {
     let (r, c) = within_counted(&t, &Pose::IDENTITY, &t, &pb, 1.0);
     assert!(!r);
     assert_eq!(c.tri_tests, 0);
+}
+
+#[test]
+fn warm_start_gives_the_same_distance() {
+    let ms = meshes();
+    let ta = tree(&ms[2], 1);
+    let tb = tree(&ms[0], 1);
+    let mut cache = DistanceCache::new();
+    let r = DistanceRequest::default();
+    for k in 0..40 {
+        let s = k as f64 / 40.0;
+        let pb = Pose::new(
+            DVec3::new(0.9 - 0.5 * s, 0.1, 0.05 * s),
+            DQuat::from_rotation_z(0.3 * s),
+        );
+        let cold = distance(&ta, &Pose::IDENTITY, &tb, &pb, &r);
+        let warm = distance_cached(&ta, &Pose::IDENTITY, &tb, &pb, &r, &mut cache);
+        assert!((cold.distance - warm.distance).abs() <= cold.error_bound);
+        assert_eq!(cache.pair(), Some(warm.triangles));
+        assert!(off_triangle(&ms[2], warm.triangles.0, &Pose::IDENTITY, warm.points[0]) <= 1e-12);
+    }
+    // A cache from other trees is harmless.
+    let other = tree(&ms[1], 1);
+    let pb = Pose::from_translation(DVec3::new(2.0, 0.0, 0.0));
+    let warm = distance_cached(&other, &Pose::IDENTITY, &tb, &pb, &r, &mut cache);
+    let cold = distance(&other, &Pose::IDENTITY, &tb, &pb, &r);
+    assert!((cold.distance - warm.distance).abs() <= cold.error_bound);
 }
