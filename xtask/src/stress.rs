@@ -449,5 +449,5 @@ pub fn run(args: &[String]) -> Result<()> {
         );
     }
     println!("exact: 0 wrong answers");
-    Ok(())
+    crate::stress_distance::run(o.pairs, o.seed, o.show)
 }
