@@ -382,7 +382,8 @@ impl<'a> Query<'a> {
             kids_b.clear();
             kids_b.extend(self.b.node_children(nb));
             if kids_a.is_empty() && kids_b.is_empty() {
-                self.leaf_pair(na, nb, best);
+                // A positive certified bound: the triangles cannot touch, skip the exact test.
+                self.leaf_pair(na, nb, best, lb > 0.0);
                 if best.d == 0.0 {
                     return;
                 }
@@ -423,13 +424,18 @@ impl<'a> Query<'a> {
         self.dir = (d > 0.0 && n.is_finite()).then_some(n);
     }
 
-    fn leaf_pair(&mut self, na: u32, nb: u32, best: &mut Best) {
+    fn leaf_pair(&mut self, na: u32, nb: u32, best: &mut Best, apart: bool) {
         for &tb in self.b.node_triangles(nb) {
             let vb = self.b_triangle(tb);
             for &ta in self.a.node_triangles(na) {
                 self.counters.tri_tests += 1;
                 let va = self.a.triangle(ta).v;
-                let (d, pa, pb) = triangle_distance(&va, &vb);
+                let (d, pa, pb) = if apart {
+                    let (d2, pa, pb) = tri::triangle_features(&va, &vb);
+                    (d2.sqrt(), pa, pb)
+                } else {
+                    triangle_distance(&va, &vb)
+                };
                 if d < best.d {
                     *best = Best {
                         d,
