@@ -497,5 +497,5 @@ pub fn run(args: &[String]) -> Result<()> {
         );
     }
     println!("exact (one pair, prepared, batched): 0 wrong answers");
-    Ok(())
+    crate::stress_distance::run(o.pairs, o.seed, o.show)
 }

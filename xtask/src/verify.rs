@@ -499,6 +499,13 @@ pub fn run(args: &[String]) -> Result<()> {
             }
         }
     }
+    if backend_filter
+        .as_deref()
+        .is_none_or(|f| "distance".contains(f))
+    {
+        failures +=
+            crate::verify_distance::run(&stored_dir(), stored, quick, scene_filter.as_deref())?;
+    }
     if failures > 0 {
         bail!("verify: {failures} rows differ from the oracle");
     }
