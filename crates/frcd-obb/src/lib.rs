@@ -20,6 +20,7 @@
 #![warn(missing_docs)]
 
 mod checked;
+pub mod distance;
 pub mod oracle;
 mod query;
 mod sat;
