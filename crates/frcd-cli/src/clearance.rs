@@ -57,10 +57,12 @@ pub struct Record {
 /// Work done by one call, for the tests and the timing notes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Work {
-    /// Pairs whose grown boxes overlap (each cost one `within` query).
+    /// Pairs whose grown boxes come within the threshold.
     pub candidates: usize,
-    /// Distance queries run (pairs within their threshold).
+    /// Distance queries run (candidates the checker did not find touching).
     pub distance_queries: usize,
+    /// Exact `within` decisions (distance within its error band of the threshold).
+    pub exact_decisions: usize,
 }
 
 /// A conservative world box of a posed tree: the local box mapped by the pose, grown by a
@@ -82,16 +84,19 @@ fn box_gap(x: &Aabb, y: &Aabb) -> f64 {
 /// - `trees[i]`, `poses[i]`: body `i`'s tree and world pose (same length);
 /// - `thresholds`: which pairs are checked and their thresholds;
 /// - `contained`: pairs `(a, b)`, `a < b`, the checker found one inside the other this frame
-///   (they report distance 0 whatever their surfaces' distance).
+///   (they report distance 0 whatever their surfaces' distance);
+/// - `touching`: `(a, b, tri_a, tri_b)`, `a < b`: one touching triangle pair of each pair the
+///   checker found interfering (distance 0 on that pair, no distance query).
 ///
 /// A pair is reported when its surfaces come within its threshold (decided exactly for the f64
-/// inputs by [`within`]) or it is `contained`. Pairs whose grown world boxes stay apart cost
-/// no query.
+/// inputs: by the distance and its error bound, by [`within`] when that is not enough), or it
+/// touches or is `contained`. Pairs whose grown world boxes stay apart cost no query.
 pub fn frame_clearances(
     trees: &[&ObbTree],
     poses: &[Pose],
     thresholds: &Thresholds,
     contained: &[(usize, usize)],
+    touching: &[(usize, usize, u32, u32)],
 ) -> (Vec<Record>, Work) {
     let mut work = Work::default();
     let mut out = Vec::new();
@@ -115,17 +120,50 @@ pub fn frame_clearances(
             };
             let is_contained = contained.contains(&(a, b));
             if !is_contained && box_gap(&boxes[a], &boxes[b]) > threshold {
+                // Touching pairs' boxes overlap, so none is lost here.
                 continue;
             }
             work.candidates += 1;
             let (ta, tb, pa, pb) = (trees[a], trees[b], &poses[a], &poses[b]);
-            if !is_contained && !within(ta, pa, tb, pb, threshold) {
+            if let Some(&(_, _, x, y)) = touching.iter().find(|t| (t.0, t.1) == (a, b)) {
+                // The checker found this triangle pair touching: distance 0, no query.
+                let (Some(tri_a), Some(tri_b)) = (
+                    ta.triangles().get(x as usize),
+                    tb.triangles().get(y as usize),
+                ) else {
+                    continue;
+                };
+                let tri_b = frcd_obb::RelativeFrame::new(pa, pb).triangle(tri_b);
+                let (_, p, q) = frcd_obb::oracle::closest_points_triangles(tri_a, &tri_b);
+                out.push(Record {
+                    a,
+                    b,
+                    distance: 0.0,
+                    points: [pa.transform_point(p), pa.transform_point(q)],
+                    triangles: (x, y),
+                    contained: false,
+                });
                 continue;
             }
             work.distance_queries += 1;
             let d = distance(ta, pa, tb, pb, &DistanceRequest::default());
             if d.distance.is_nan() {
                 continue; // non-finite poses: the scene loader refuses them
+            }
+            // `d` is the length of a real point pair (up to the rounding in `error_bound`), so
+            // `d + error_bound <= threshold` proves the pair within. It is also accurate to
+            // `error_bound` for well-conditioned features and to ~sqrt(ε)·L in the worst case
+            // (see `frcd_obb::distance`): `WORST` covers that with a wide margin. In the band
+            // between, `within` decides exactly.
+            const WORST: f64 = (1u64 << 28) as f64;
+            let inside = is_contained
+                || d.distance + d.error_bound <= threshold
+                || (d.distance - d.error_bound * WORST <= threshold && {
+                    work.exact_decisions += 1;
+                    within(ta, pa, tb, pb, threshold)
+                });
+            if !inside {
+                continue;
             }
             out.push(Record {
                 a,
@@ -213,7 +251,7 @@ mod tests {
                     Pose::new(t, q)
                 })
                 .collect();
-            let (got, work) = frame_clearances(&tree_refs, &poses, &thresholds, &[]);
+            let (got, work) = frame_clearances(&tree_refs, &poses, &thresholds, &[], &[]);
             assert!(work.distance_queries <= work.candidates);
             for a in 0..n {
                 for b in a + 1..n {
@@ -222,7 +260,8 @@ mod tests {
                         assert!(r.is_none(), "frame {frame}: pair {a}/{b} has no threshold");
                         continue;
                     };
-                    let o = frcd_obb::oracle::distance(&meshes[a], &poses[a], &meshes[b], &poses[b]);
+                    let o =
+                        frcd_obb::oracle::distance(&meshes[a], &poses[a], &meshes[b], &poses[b]);
                     let exact_within = frcd_obb::oracle::within_exact(
                         &meshes[a], &poses[a], &meshes[b], &poses[b], t,
                     );
@@ -295,29 +334,37 @@ mod tests {
             excluded: HashSet::new(),
             is_static: vec![false; 3],
         };
-        let (r, work) = frame_clearances(&trees, &poses, &th, &[]);
+        let (r, work) = frame_clearances(&trees, &poses, &th, &[], &[]);
         assert_eq!(r.len(), 2, "{r:?}");
         assert_eq!((r[0].a, r[0].b, r[0].distance), (0, 1, 0.0));
         assert_eq!((r[1].a, r[1].b), (1, 2));
         assert!((r[1].distance - 0.005).abs() < 1e-12);
         // Pair 0/2 is far: no query at all.
         assert_eq!(work.candidates, 2);
+        // Told that 0/1 touch on triangles (0, 0): distance 0 there, one query fewer.
+        let (r2, work2) = frame_clearances(&trees, &poses, &th, &[], &[(0, 1, 0, 0)]);
+        assert_eq!((r2[0].distance, r2[0].triangles), (0.0, (0, 0)));
+        assert_eq!(work2.distance_queries, work.distance_queries - 1);
         // Contained pairs report 0, whatever their surfaces' distance; no threshold: nothing.
         let inner = Pose::IDENTITY;
         let small = shapes::cuboid(DVec3::splat(0.1));
         let ts = ObbTree::build(&small, &BuildOptions::default());
-        let (r, _) = frame_clearances(&[&t, &ts], &[Pose::IDENTITY, inner], &th, &[(0, 1)]);
+        let (r, _) = frame_clearances(&[&t, &ts], &[Pose::IDENTITY, inner], &th, &[(0, 1)], &[]);
         assert_eq!(r.len(), 1);
         assert!(r[0].contained && r[0].distance == 0.0);
         let none = Thresholds {
             is_static: vec![false; 3],
             ..Default::default()
         };
-        assert!(frame_clearances(&trees, &poses, &none, &[]).0.is_empty());
+        assert!(
+            frame_clearances(&trees, &poses, &none, &[], &[])
+                .0
+                .is_empty()
+        );
         // Both static, or excluded: never reported.
         let mut st = th.clone();
         st.is_static = vec![true, true, false];
         st.excluded.insert((1, 2));
-        assert!(frame_clearances(&trees, &poses, &st, &[]).0.is_empty());
+        assert!(frame_clearances(&trees, &poses, &st, &[], &[]).0.is_empty());
     }
 }

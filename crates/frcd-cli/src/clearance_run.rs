@@ -93,10 +93,18 @@ impl ClearanceRun {
             .filter(|c| c.contained.is_some())
             .map(|c| (c.a.min(c.b), c.a.max(c.b)))
             .collect();
+        let touching: Vec<(usize, usize, u32, u32)> = r
+            .contacts
+            .iter()
+            .filter(|c| c.a < c.b)
+            .filter_map(|c| c.pairs.first().map(|&(x, y)| (c.a, c.b, x, y)))
+            .collect();
         let trees: Vec<&ObbTree> = self.body_tree.iter().map(|&m| &self.trees[m]).collect();
-        let (records, work) = frame_clearances(&trees, poses, &self.thresholds, &contained);
+        let (records, work) =
+            frame_clearances(&trees, poses, &self.thresholds, &contained, &touching);
         self.work.candidates += work.candidates;
         self.work.distance_queries += work.distance_queries;
+        self.work.exact_decisions += work.exact_decisions;
         self.frames.push(
             records
                 .iter()
@@ -140,11 +148,12 @@ impl ClearanceRun {
     pub fn print(&self, report: &Report, frames: usize) {
         let summary = self.summary(report);
         println!(
-            "clearance (threshold {}; {:.1} µs/frame mean, {} box candidates, {} distance queries):",
+            "clearance (threshold {}; {:.1} µs/frame mean, {} box candidates, {} distance queries, {} exact decisions):",
             self.threshold_text(),
             self.total_us / frames.max(1) as f64,
             self.work.candidates,
-            self.work.distance_queries
+            self.work.distance_queries,
+            self.work.exact_decisions
         );
         if summary.is_empty() {
             println!("  no checked pair came within its threshold");
@@ -231,7 +240,10 @@ impl ClearanceRun {
             .iter()
             .filter(|s| wanted(s))
             .map(|s| crate::plot::PairSeries {
-                label: format!("{} / {} (min {:.4} at {})", s.a, s.b, s.min_distance, s.min_frame),
+                label: format!(
+                    "{} / {} (min {:.4} at {})",
+                    s.a, s.b, s.min_distance, s.min_frame
+                ),
                 points: Vec::new(),
                 zero_intervals: s.zero_intervals.clone(),
             })
@@ -254,7 +266,8 @@ impl ClearanceRun {
         let title = format!(
             "{}: clearance per body pair (threshold {})",
             report.scene.as_deref().unwrap_or("scene"),
-            c.default.map_or_else(|| "per pair".to_string(), |d| d.to_string())
+            c.default
+                .map_or_else(|| "per pair".to_string(), |d| d.to_string())
         );
         let svg = crate::plot::clearance_svg(
             &series,

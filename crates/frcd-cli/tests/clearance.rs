@@ -136,7 +136,10 @@ fn clearance_in_json_csv_summary_and_plot() {
     assert_eq!(c0["triangles"].as_array().unwrap().len(), 2);
     // Frame 4: the ball inside `a` reports 0, contained.
     let c4 = v["frames"][4]["clearances"].as_array().unwrap();
-    let ball = c4.iter().find(|c| c["b"] == "ball").expect("contained ball");
+    let ball = c4
+        .iter()
+        .find(|c| c["b"] == "ball")
+        .expect("contained ball");
     assert_eq!(ball["distance"].as_f64(), Some(0.0));
     assert_eq!(ball["contained"], true);
     // The excluded pair b / ball never appears.

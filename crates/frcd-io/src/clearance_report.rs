@@ -114,11 +114,16 @@ pub fn clearance_csv(report: &Report, clearances: &[Vec<ClearanceRecord>]) -> St
     for (k, f) in report.frames.iter().enumerate() {
         let recs: &[ClearanceRecord] = clearances.get(k).map_or(&[], Vec::as_slice);
         // Rows keyed by pair names, interferences first in their order, then clearance-only.
-        let mut rows: Vec<(&str, &str, Option<&crate::Interference>, Option<&ClearanceRecord>)> =
-            f.interferences
-                .iter()
-                .map(|i| (i.a.as_str(), i.b.as_str(), Some(i), None))
-                .collect();
+        let mut rows: Vec<(
+            &str,
+            &str,
+            Option<&crate::Interference>,
+            Option<&ClearanceRecord>,
+        )> = f
+            .interferences
+            .iter()
+            .map(|i| (i.a.as_str(), i.b.as_str(), Some(i), None))
+            .collect();
         for r in recs {
             match rows.iter_mut().find(|x| x.0 == r.a && x.1 == r.b) {
                 Some(row) => row.3 = Some(r),

@@ -49,8 +49,8 @@ pub use mesh::{
 };
 pub use report::{FrameReport, Interference, PairSummary, Report};
 pub use scene::{
-    Body, BodySpec, Frame, FrameIter, FramePoses, Frames, PoseSpec, Scene, SceneFile,
-    SceneOptions, UNIT_QUATERNION_TOLERANCE,
+    Body, BodySpec, Frame, FrameIter, FramePoses, Frames, PoseSpec, Scene, SceneFile, SceneOptions,
+    UNIT_QUATERNION_TOLERANCE,
 };
 pub use trajectory::{TRAJECTORY_HEADER, Trajectory, TrajectoryRow};
 pub use write::{write_obj, write_stl_binary};
