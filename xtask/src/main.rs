@@ -11,6 +11,7 @@ mod bench_gpgpu;
 mod bench_hybrid;
 mod bench_image;
 mod bench_tritri;
+mod fuzz;
 mod gen_bogie;
 mod stress;
 mod verify;
@@ -29,6 +30,7 @@ fn main() -> Result<()> {
         "bench" => bench(rest),
         "verify" => verify::run(rest),
         "gen-bogie" => gen_bogie::run(rest),
+        "fuzz" => fuzz::run(rest),
         "help" | "--help" | "-h" => {
             println!("usage: cargo xtask <stress|verify|bench|gen-bogie> [args]");
             Ok(())

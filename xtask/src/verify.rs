@@ -399,10 +399,7 @@ fn demo_scene() -> Result<Scene> {
                 is_static: b.is_static,
             })
             .collect(),
-        frames: picks
-            .iter()
-            .map(|&f| loaded.frame(f).poses)
-            .collect(),
+        frames: picks.iter().map(|&f| loaded.frame(f).poses).collect(),
     })
 }
 

@@ -109,7 +109,10 @@ fn mesh_notes(scene: &Scene, solid: bool) -> Vec<String> {
         let t = m.topology();
         let mut found = Vec::new();
         if !r.degenerate.is_empty() {
-            found.push(format!("{} degenerate (zero-area) triangles", r.degenerate.len()));
+            found.push(format!(
+                "{} degenerate (zero-area) triangles",
+                r.degenerate.len()
+            ));
         }
         if !r.duplicates.is_empty() {
             found.push(format!("{} duplicate triangles", r.duplicates.len()));
@@ -537,22 +540,38 @@ pub fn check(run: &CheckRun) -> Result<()> {
         }
     }
     if let Some(path) = &run.json {
-        let mut value = serde_json::to_value(&report).context("report to JSON")?;
-        if let Some(obj) = value.as_object_mut() {
-            obj.insert("median_time_us".into(), serde_json::json!(median));
-            obj.insert("setup_ms".into(), serde_json::json!(setup_ms.round()));
-            obj.insert(
-                "stages".into(),
-                serde_json::json!({"broad": tallies[0], "image": tallies[1], "narrow": tallies[2]}),
-            );
-            obj.insert("devices".into(), serde_json::json!(checker.adapters()));
-            obj.insert("notes".into(), serde_json::json!(notes));
+        /// The report plus the run's figures, serialised straight to text (no JSON tree in
+        /// memory: a million frames would take a gigabyte as `serde_json::Value`).
+        #[derive(serde::Serialize)]
+        struct Full<'a> {
+            #[serde(flatten)]
+            report: &'a Report,
+            median_time_us: f64,
+            setup_ms: f64,
+            stages: serde_json::Value,
+            devices: Vec<String>,
+            notes: &'a [String],
         }
-        if let Some(c) = &clearance {
-            c.add_json(&mut value, &report)?;
-        }
-        let text = serde_json::to_string_pretty(&value).context("report to JSON")?;
-        frcd_io::write_atomic(path, (text + "\n").as_bytes())?;
+        let full = Full {
+            report: &report,
+            median_time_us: median,
+            setup_ms: setup_ms.round(),
+            stages: serde_json::json!({"broad": tallies[0], "image": tallies[1], "narrow": tallies[2]}),
+            devices: checker.adapters(),
+            notes: &notes,
+        };
+        let mut text = match &clearance {
+            // Clearance goes into every frame: through a JSON tree (the streamed form when the
+            // run has no clearance).
+            Some(c) => {
+                let mut value = serde_json::to_value(&full).context("report to JSON")?;
+                c.add_json(&mut value, &report)?;
+                serde_json::to_vec_pretty(&value).context("report to JSON")?
+            }
+            None => serde_json::to_vec_pretty(&full).context("report to JSON")?,
+        };
+        text.push(b'\n');
+        frcd_io::write_atomic(path, &text)?;
     }
     if let Some(path) = &run.csv {
         match &clearance {
@@ -683,7 +702,12 @@ pub fn bench(
             ..Default::default()
         },
     )
-    .with_context(|| format!("cannot load scene {}", term(&scene_path.display().to_string())))?;
+    .with_context(|| {
+        format!(
+            "cannot load scene {}",
+            term(&scene_path.display().to_string())
+        )
+    })?;
     let mut inputs = scene.input_paths();
     inputs.extend(early_inputs);
     check_outputs(&outputs, &inputs)?;
@@ -691,11 +715,7 @@ pub fn bench(
         bail!("--frames 0 times nothing: give at least 1");
     }
     let frames = frames.min(scene.frame_count());
-    let all: Vec<Vec<Pose>> = scene
-        .frames()
-        .range(0..frames)
-        .map(|f| f.poses)
-        .collect();
+    let all: Vec<Vec<Pose>> = scene.frames().range(0..frames).map(|f| f.poses).collect();
     let (cost, source) = cost_model(cost, false)?;
     println!(
         "{}: {} bodies, {} triangles, {} frames timed per row; cost model {source}",

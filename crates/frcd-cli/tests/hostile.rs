@@ -66,7 +66,12 @@ fn tempdir(name: &str) -> PathBuf {
 /// Cube `a` (static) and cube `b` moving along x through it, frames from a trajectory CSV
 /// (`frames` frames); ball `c` inside `a` in frame 2 only.
 fn scene(dir: &Path, frames: usize, name_b: &str) -> PathBuf {
-    frcd_io::write_obj(dir.join("cube.obj"), &shapes::cuboid(DVec3::splat(0.5)), "cube").unwrap();
+    frcd_io::write_obj(
+        dir.join("cube.obj"),
+        &shapes::cuboid(DVec3::splat(0.5)),
+        "cube",
+    )
+    .unwrap();
     frcd_io::write_stl_binary(dir.join("ball.stl"), &shapes::icosphere(0.1, 1)).unwrap();
     let mut csv = String::from("frame,body,x,y,z,qx,qy,qz,qw\n");
     let name_csv = name_b.replace('"', "\"\"");
@@ -113,10 +118,16 @@ fn outputs_never_overwrite_inputs_or_each_other() {
     scene(&dir, 5, "b");
     let before = snapshot(&dir);
     for (args, needle) in [
-        (vec!["check", "scene.json", "--json", "scene.json"], "inputs"),
+        (
+            vec!["check", "scene.json", "--json", "scene.json"],
+            "inputs",
+        ),
         (vec!["check", "scene.json", "--csv", "traj.csv"], "inputs"),
         (vec!["check", "scene.json", "--json", "cube.obj"], "inputs"),
-        (vec!["check", "scene.json", "--json", "./ball.stl"], "inputs"),
+        (
+            vec!["check", "scene.json", "--json", "./ball.stl"],
+            "inputs",
+        ),
         (
             vec!["check", "scene.json", "--json", "r.out", "--csv", "./r.out"],
             "also given to --json",
@@ -150,7 +161,11 @@ fn output_paths_are_checked_before_the_run() {
         let o = frcd(&["check", "scene.json", "--json", out], &dir);
         assert_clean_failure(&o, needle);
         // Nothing was checked: the summary line of a run never appeared.
-        assert!(!String::from_utf8_lossy(&o.stdout).contains("time per frame"), "{}", text(&o));
+        assert!(
+            !String::from_utf8_lossy(&o.stdout).contains("time per frame"),
+            "{}",
+            text(&o)
+        );
     }
     // A previous report is replaced whole, and no temporary file is left behind.
     std::fs::write(dir.join("r.json"), "old").unwrap();
@@ -208,7 +223,16 @@ fn counts_do_not_wrap_and_zero_is_refused() {
     let dir = tempdir("counts");
     scene(&dir, 8, "b");
     let o = frcd(
-        &["check", "scene.json", "--first", "5", "--count", "18446744073709551614", "--json", "r.json"],
+        &[
+            "check",
+            "scene.json",
+            "--first",
+            "5",
+            "--count",
+            "18446744073709551614",
+            "--json",
+            "r.json",
+        ],
         &dir,
     );
     assert!(o.status.success(), "{}", text(&o));
@@ -217,8 +241,14 @@ fn counts_do_not_wrap_and_zero_is_refused() {
     assert_eq!(v["frames"].as_array().unwrap().len(), 3, "frames 5, 6, 7");
     assert_eq!(v["frame_range"], serde_json::json!([5, 7]));
     assert!(String::from_utf8_lossy(&o.stdout).contains("frames 5..=7 (3 checked)"));
-    assert_clean_failure(&frcd(&["check", "scene.json", "--count", "0"], &dir), "--count 0");
-    assert_clean_failure(&frcd(&["bench", "scene.json", "--frames", "0"], &dir), "--frames 0");
+    assert_clean_failure(
+        &frcd(&["check", "scene.json", "--count", "0"], &dir),
+        "--count 0",
+    );
+    assert_clean_failure(
+        &frcd(&["bench", "scene.json", "--frames", "0"], &dir),
+        "--frames 0",
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -231,7 +261,14 @@ fn huge_frame_indices_are_clean_errors_and_far_frames_cost_no_memory() {
     std::fs::write(dir.join("bad.csv"), &csv).unwrap();
     for args in [
         vec!["check", "scene.json", "--trajectory", "bad.csv"],
-        vec!["render", "scene.json", "--trajectory", "bad.csv", "-o", "x.png"],
+        vec![
+            "render",
+            "scene.json",
+            "--trajectory",
+            "bad.csv",
+            "-o",
+            "x.png",
+        ],
     ] {
         assert_clean_failure(&frcd(&args, &dir), "past the limit");
     }
@@ -242,7 +279,16 @@ fn huge_frame_indices_are_clean_errors_and_far_frames_cost_no_memory() {
     )
     .unwrap();
     let o = frcd(
-        &["check", "scene.json", "--trajectory", "far.csv", "--first", "999998", "--json", "r.json"],
+        &[
+            "check",
+            "scene.json",
+            "--trajectory",
+            "far.csv",
+            "--first",
+            "999998",
+            "--json",
+            "r.json",
+        ],
         &dir,
     );
     assert!(o.status.success(), "{}", text(&o));
@@ -294,8 +340,16 @@ fn quiet_prints_nothing_and_progress_never_reaches_a_log() {
     // Not quiet, output redirected: the summary, but no progress line.
     let o = frcd(&["check", "scene.json"], &dir);
     assert!(o.status.success(), "{}", text(&o));
-    assert!(!o.stderr.contains(&b'\r') && !o.stdout.contains(&b'\r'), "{}", text(&o));
-    assert!(!String::from_utf8_lossy(&o.stderr).contains("frame 1"), "{}", text(&o));
+    assert!(
+        !o.stderr.contains(&b'\r') && !o.stdout.contains(&b'\r'),
+        "{}",
+        text(&o)
+    );
+    assert!(
+        !String::from_utf8_lossy(&o.stderr).contains("frame 1"),
+        "{}",
+        text(&o)
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -303,11 +357,25 @@ fn quiet_prints_nothing_and_progress_never_reaches_a_log() {
 fn the_report_says_what_it_measured() {
     let dir = tempdir("report");
     scene(&dir, 5, "b");
-    let o = frcd(&["check", "scene.json", "--json", "r.json", "--pairs", "--backend", "cpu"], &dir);
+    let o = frcd(
+        &[
+            "check",
+            "scene.json",
+            "--json",
+            "r.json",
+            "--pairs",
+            "--backend",
+            "cpu",
+        ],
+        &dir,
+    );
     assert!(o.status.success(), "{}", text(&o));
     let stdout = String::from_utf8_lossy(&o.stdout);
     // The ball sits inside `a` in frame 2: said in words, not as "0 triangle pairs".
-    assert!(stdout.contains("a / c: frames 2..=2 (1 frames, contained)"), "{stdout}");
+    assert!(
+        stdout.contains("a / c: frames 2..=2 (1 frames, contained)"),
+        "{stdout}"
+    );
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("r.json")).unwrap()).unwrap();
     assert_eq!(v["frcd_version"], env!("CARGO_PKG_VERSION"));
@@ -319,13 +387,21 @@ fn the_report_says_what_it_measured() {
         assert_eq!((t * 10.0).round() / 10.0, t, "time rounded to 0.1 µs: {t}");
         for i in f["interferences"].as_array().unwrap() {
             let n = i["triangle_pairs"].as_u64().unwrap() as usize;
-            let listed = i.get("triangles").map_or(0, |t| t.as_array().unwrap().len());
+            let listed = i
+                .get("triangles")
+                .map_or(0, |t| t.as_array().unwrap().len());
             assert_eq!(listed, n, "{i}");
             any_pairs |= n > 0;
         }
     }
     assert!(any_pairs);
-    assert!(v["pairs"].as_array().unwrap().iter().any(|p| p["contained"] == true));
+    assert!(
+        v["pairs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|p| p["contained"] == true)
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -342,7 +418,10 @@ fn loaded_mesh_problems_are_reported() {
     frcd_io::write_obj(dir.join("open.obj"), &open, "open").unwrap();
     let open_scene = std::fs::read_to_string(dir.join("scene.json"))
         .unwrap()
-        .replace("\"mesh\": \"cube.obj\", \"static\": true", "\"mesh\": \"open.obj\", \"static\": true");
+        .replace(
+            "\"mesh\": \"cube.obj\", \"static\": true",
+            "\"mesh\": \"open.obj\", \"static\": true",
+        );
     std::fs::write(dir.join("open.json"), open_scene).unwrap();
     let o = frcd(&["check", "open.json", "--mode", "exact"], &dir);
     assert!(o.status.success(), "{}", text(&o));

@@ -314,7 +314,10 @@ impl<'a> Frames<'a> {
             (self.scene.initial_poses(), 0)
         } else {
             let f = self.scene.frame(start - 1);
-            let cursor = self.scene.keys.partition_point(|k| (k.frame as usize) < start);
+            let cursor = self
+                .scene
+                .keys
+                .partition_point(|k| (k.frame as usize) < start);
             (f.poses, cursor)
         };
         FrameIter {
@@ -431,7 +434,10 @@ impl Scene {
         if spec.bodies.len() > u32::MAX as usize {
             return Err(Error::Invalid {
                 path: path.into(),
-                msg: format!("{} bodies: more than u32 indices address", spec.bodies.len()),
+                msg: format!(
+                    "{} bodies: more than u32 indices address",
+                    spec.bodies.len()
+                ),
             });
         }
         let mut index: HashMap<&str, usize> = HashMap::new();
@@ -590,10 +596,7 @@ impl Scene {
                     return Err(Error::Limit {
                         path: traj.path.clone(),
                         place: place(),
-                        msg: format!(
-                            "frame {} is past the limit of {max_frames} frames",
-                            r.frame
-                        ),
+                        msg: format!("frame {} is past the limit of {max_frames} frames", r.frame),
                     });
                 }
                 keys.push(Key {

@@ -242,7 +242,10 @@ impl<'a> LineCounter<'a> {
             self.pos = 0;
             self.newlines = 0;
         }
-        self.newlines += self.bytes[self.pos..b].iter().filter(|&&c| c == b'\n').count();
+        self.newlines += self.bytes[self.pos..b]
+            .iter()
+            .filter(|&&c| c == b'\n')
+            .count();
         self.pos = b;
         1 + self.newlines
     }

@@ -24,7 +24,9 @@ fn scene_with(dir: &Path, mesh: &str, trajectory: Option<&str>) -> PathBuf {
     write(
         dir,
         "scene.json",
-        &format!(r#"{{"bodies": [{{"name": "a", "mesh": "{mesh}"}}, {{"name": "b", "mesh": "box.stl"}}]{t}}}"#),
+        &format!(
+            r#"{{"bodies": [{{"name": "a", "mesh": "{mesh}"}}, {{"name": "b", "mesh": "box.stl"}}]{t}}}"#
+        ),
     )
 }
 
@@ -33,7 +35,11 @@ const HEADER: &str = "frame,body,x,y,z,qx,qy,qz,qw\n";
 #[test]
 fn a_far_frame_is_stored_sparsely() {
     let dir = temp_dir("sparse");
-    write(&dir, "t.csv", &format!("{HEADER}1000000,a,0,0,5,0,0,0,1\n3,b,1,0,0,0,0,0,1\n"));
+    write(
+        &dir,
+        "t.csv",
+        &format!("{HEADER}1000000,a,0,0,5,0,0,0,1\n3,b,1,0,0,0,0,0,1\n"),
+    );
     let s = Scene::load(scene_with(&dir, "box.stl", Some("t.csv"))).unwrap();
     assert_eq!(s.frame_count(), 1_000_001);
     // Two poses stored, not a million frames of two.
@@ -66,7 +72,10 @@ fn frame_indices_past_the_limit_are_errors_not_panics_or_huge_allocations() {
     for frame in ["18446744073709551615", "1000000000000", "1000000000"] {
         write(&dir, "t.csv", &format!("{HEADER}{frame},a,0,0,5,0,0,0,1\n"));
         let e = Scene::load(scene_with(&dir, "box.stl", Some("t.csv"))).unwrap_err();
-        assert!(matches!(&e, Error::Limit { place, .. } if place == "line 2"), "{frame}: {e}");
+        assert!(
+            matches!(&e, Error::Limit { place, .. } if place == "line 2"),
+            "{frame}: {e}"
+        );
         assert!(Trajectory::load(dir.join("t.csv")).is_err());
     }
     // A lower limit set by the caller.
@@ -191,11 +200,21 @@ fn files_over_the_limits_are_refused() {
 fn a_body_twice_in_one_frame_names_both_places_across_files() {
     let dir = temp_dir("twice");
     write(&dir, "t.csv", &format!("{HEADER}1,a,0,0,5,0,0,0,1\n"));
-    write(&dir, "u.csv", &format!("{HEADER}0,b,0,0,5,0,0,0,1\n\n1,a,0,0,6,0,0,0,1\n"));
-    let e = Scene::load_with_trajectory(scene_with(&dir, "box.stl", Some("t.csv")), dir.join("u.csv"))
-        .unwrap_err();
+    write(
+        &dir,
+        "u.csv",
+        &format!("{HEADER}0,b,0,0,5,0,0,0,1\n\n1,a,0,0,6,0,0,0,1\n"),
+    );
+    let e = Scene::load_with_trajectory(
+        scene_with(&dir, "box.stl", Some("t.csv")),
+        dir.join("u.csv"),
+    )
+    .unwrap_err();
     let msg = e.to_string();
-    assert!(msg.contains("u.csv: line 4") && msg.contains("t.csv: line 2"), "{msg}");
+    assert!(
+        msg.contains("u.csv: line 4") && msg.contains("t.csv: line 2"),
+        "{msg}"
+    );
 }
 
 #[test]
@@ -206,4 +225,34 @@ fn header_errors_show_little_and_escape_it() {
     let msg = Trajectory::load(&p).unwrap_err().to_string();
     assert!(!msg.contains('\u{1b}'), "{msg}");
     assert!(msg.len() < 300, "{}", msg.len());
+}
+
+/// Found by the scene fuzz target: serde_json's default float parser was off by an ulp on some
+/// 17-digit numbers, so a pose read from a scene was not the pose written in it.
+#[test]
+fn scene_numbers_are_read_exactly() {
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    let mut texts = vec![
+        "1.0000000000080002e+44".to_string(),
+        "2.2250738585072011e-308".into(),
+    ];
+    for _ in 0..2000 {
+        let mantissa = next() % 100_000_000_000_000_000;
+        let exp = (next() % 600) as i64 - 300;
+        texts.push(format!("{mantissa}e{exp}"));
+    }
+    for t in texts {
+        let want: f64 = t.parse().unwrap();
+        let json = format!(
+            r#"{{"bodies": [{{"name": "a", "mesh": "a.stl", "pose": {{"t": [{t}, 0, 0], "q": [0, 0, 0, 1]}}}}]}}"#
+        );
+        let spec = frcd_io::SceneFile::parse(&json, Path::new("s.json")).unwrap();
+        assert_eq!(spec.bodies[0].pose.t[0].to_bits(), want.to_bits(), "{t}");
+    }
 }

@@ -52,19 +52,27 @@ pub enum QueryError {
 
 /// Checks both poses and the range of B mapped into A's frame.
 fn check(a_pose: &Pose, b: &ObbTree, b_pose: &Pose, a: &ObbTree) -> Result<(), QueryError> {
-    a_pose.validate().map_err(|source| QueryError::InvalidPose {
-        body: PairSide::A,
-        source,
-    })?;
-    b_pose.validate().map_err(|source| QueryError::InvalidPose {
-        body: PairSide::B,
-        source,
-    })?;
+    a_pose
+        .validate()
+        .map_err(|source| QueryError::InvalidPose {
+            body: PairSide::A,
+            source,
+        })?;
+    b_pose
+        .validate()
+        .map_err(|source| QueryError::InvalidPose {
+            body: PairSide::B,
+            source,
+        })?;
     let frame = RelativeFrame::new(a_pose, b_pose);
     // Every mapped coordinate is at most |t|max + |p| (a rotation keeps lengths), plus rounding.
     let reach = frame.t.abs().max_element() + b.radius_from_origin * (1.0 + 1e-12);
     let a_reach = a.radius_from_origin;
-    if !frame.t.is_finite() || !frame.m.is_finite() || !(reach < f64::MAX) || !a_reach.is_finite()
+    if !frame.t.is_finite()
+        || !frame.m.is_finite()
+        || !reach.is_finite()
+        || reach >= f64::MAX
+        || !a_reach.is_finite()
     {
         return Err(QueryError::OutOfRange {
             reach,
@@ -148,11 +156,15 @@ mod tests {
         let mut cache = PairCache::default();
         for p in bad {
             match try_collide(&t, &Pose::IDENTITY, &t, &p, &r) {
-                Err(QueryError::InvalidPose { body: PairSide::B, .. }) => {}
+                Err(QueryError::InvalidPose {
+                    body: PairSide::B, ..
+                }) => {}
                 other => panic!("{p:?}: {other:?}"),
             }
             match try_collide_cached(&t, &p, &t, &Pose::IDENTITY, &r, &mut cache) {
-                Err(QueryError::InvalidPose { body: PairSide::A, .. }) => {}
+                Err(QueryError::InvalidPose {
+                    body: PairSide::A, ..
+                }) => {}
                 other => panic!("{p:?}: {other:?}"),
             }
         }

@@ -224,15 +224,18 @@ mod magnitude_tests {
         // The +x face is at f64::MAX: rays that point that way have no finite end beyond it and
         // are skipped; the others decide.
         let m = f64::MAX;
-        let c = shapes::cuboid(DVec3::splat(m / 2.0)).transformed(&frcd_geom::Pose::from_translation(
-            DVec3::new(m / 2.0, 0.0, 0.0),
-        ));
+        let c = shapes::cuboid(DVec3::splat(m / 2.0)).transformed(
+            &frcd_geom::Pose::from_translation(DVec3::new(m / 2.0, 0.0, 0.0)),
+        );
         let tris: Vec<Triangle> = c.triangles().collect();
         let b = c.aabb();
         assert_eq!(b.max.x, m);
         for seed in 0..4 {
             let p = DVec3::new(m / 2.0, m / 4.0, 0.0);
-            assert_eq!(point_inside(p, tris.len(), |i| tris[i], &b, seed), Some(true));
+            assert_eq!(
+                point_inside(p, tris.len(), |i| tris[i], &b, seed),
+                Some(true)
+            );
         }
     }
 
