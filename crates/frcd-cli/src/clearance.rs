@@ -320,11 +320,11 @@ mod tests {
         let m = shapes::cuboid(DVec3::splat(0.5));
         let t = ObbTree::build(&m, &BuildOptions::default());
         let trees = [&t, &t, &t];
-        // 0 and 1 touch face to face; 2 is 0.5 beyond the 5 mm threshold.
+        // 0 and 1 touch face to face; 2 is 4 mm from 1 (within 5 mm), 1.504 from 0.
         let poses = [
             Pose::IDENTITY,
             Pose::from_translation(DVec3::new(1.0, 0.0, 0.0)),
-            Pose::from_translation(DVec3::new(2.505, 0.0, 0.0)),
+            Pose::from_translation(DVec3::new(2.004, 0.0, 0.0)),
         ];
         let th = Thresholds {
             clearances: Clearances {
@@ -338,7 +338,7 @@ mod tests {
         assert_eq!(r.len(), 2, "{r:?}");
         assert_eq!((r[0].a, r[0].b, r[0].distance), (0, 1, 0.0));
         assert_eq!((r[1].a, r[1].b), (1, 2));
-        assert!((r[1].distance - 0.005).abs() < 1e-12);
+        assert!((r[1].distance - 0.004).abs() < 1e-12);
         // Pair 0/2 is far: no query at all.
         assert_eq!(work.candidates, 2);
         // Told that 0/1 touch on triangles (0, 0): distance 0 there, one query fewer.
