@@ -836,6 +836,7 @@ pub fn run(args: &[String]) -> Result<()> {
         exclude,
         trajectory: Some("trajectory.csv".into()),
         frames: Vec::new(),
+        ..SceneFile::default()
     };
     spec.write(out.join("scene.json"))?;
     let frames = (DURATION * RATE).round() as usize + 1;

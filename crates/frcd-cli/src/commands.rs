@@ -24,6 +24,7 @@ pub struct CheckRun {
     pub quiet: bool,
     pub pair_times: bool,
     pub pairs: bool,
+    pub clearance: crate::clearance_run::ClearanceArgs,
 }
 
 fn load_scene(path: &Path, args: &CheckerArgs) -> Result<Scene> {
@@ -371,6 +372,12 @@ pub fn check(run: &CheckRun) -> Result<()> {
     if let Some(p) = &run.csv {
         outputs.push(("--csv", p));
     }
+    if let Some(p) = &run.clearance.plot {
+        outputs.push(("--plot-clearance", p));
+    }
+    if let Some(t) = run.clearance.threshold {
+        frcd_io::check_clearance(t).map_err(|m| anyhow::anyhow!("--clearance: {m}"))?;
+    }
     let mut early_inputs = vec![run.scene.clone()];
     early_inputs.extend(run.checker.trajectory.iter().cloned());
     early_inputs.extend(run.checker.cost.iter().cloned());
@@ -396,7 +403,9 @@ pub fn check(run: &CheckRun) -> Result<()> {
     let mode = options.mode;
     let solid = options.solid;
     let t_setup = Instant::now();
+    let build = options.build;
     let checker = make_checker(&scene, options)?;
+    let mut clearance = crate::clearance_run::ClearanceRun::new(&scene, &run.clearance, &build)?;
     let setup_ms = t_setup.elapsed().as_secs_f64() * 1e3;
     let mut notes: Vec<String> = checker.notes().iter().map(|n| term(n)).collect();
     notes.extend(mesh_notes(&scene, solid));
@@ -420,6 +429,9 @@ pub fn check(run: &CheckRun) -> Result<()> {
         let r = checker
             .check(poses, &mut state)
             .with_context(|| format!("frame {index}"))?;
+        if let Some(c) = clearance.as_mut() {
+            c.frame(poses, &r);
+        }
         let time_us = t.elapsed().as_secs_f64() * 1e6;
         for (tally, s) in tallies.iter_mut().zip(&r.stages) {
             tally.add(s.backend, s.time_us);
@@ -514,6 +526,18 @@ pub fn check(run: &CheckRun) -> Result<()> {
                 );
             }
         }
+        if let Some(c) = &clearance {
+            c.print(&report, total);
+        }
+    }
+    if let (Some(c), Some(path)) = (&clearance, &run.clearance.plot) {
+        let n = c.plot(path, &report, &run.clearance)?;
+        if !run.quiet {
+            println!(
+                "{}: clearance of {n} pairs plotted",
+                term(&path.display().to_string())
+            );
+        }
     }
     if let Some(path) = &run.json {
         /// The report plus the run's figures, serialised straight to text (no JSON tree in
@@ -536,12 +560,24 @@ pub fn check(run: &CheckRun) -> Result<()> {
             devices: checker.adapters(),
             notes: &notes,
         };
-        let mut text = serde_json::to_vec_pretty(&full).context("report to JSON")?;
+        let mut text = match &clearance {
+            // Clearance goes into every frame: through a JSON tree (the streamed form when the
+            // run has no clearance).
+            Some(c) => {
+                let mut value = serde_json::to_value(&full).context("report to JSON")?;
+                c.add_json(&mut value, &report)?;
+                serde_json::to_vec_pretty(&value).context("report to JSON")?
+            }
+            None => serde_json::to_vec_pretty(&full).context("report to JSON")?,
+        };
         text.push(b'\n');
         frcd_io::write_atomic(path, &text)?;
     }
     if let Some(path) = &run.csv {
-        report.write_csv(path)?;
+        match &clearance {
+            Some(c) => frcd_io::write_atomic(path, c.csv(&report).as_bytes())?,
+            None => report.write_csv(path)?,
+        }
     }
     Ok(())
 }

@@ -3,13 +3,18 @@
 //!
 //! - `frcd check SCENE [--backend cpu|gpgpu|image|hybrid] [--mode exact|fast] [--json OUT]
 //!   [--csv OUT] [--segments]`: per frame the interfering body pairs, their touching triangle
-//!   pairs, the time per frame; a summary of when each pair interferes.
+//!   pairs, the time per frame; a summary of when each pair interferes. With `--clearance M`
+//!   (or the scene's `"clearance"` / `"clearances"`) also every checked pair closer than its
+//!   threshold: distance, closest points, triangle pair; `--plot-clearance OUT.svg` plots it.
 //! - `frcd render SCENE --frame N -o out.png`: an offscreen picture with the interfering
 //!   triangles highlighted (feature `gpu`).
 //! - `frcd bench SCENE`: time per frame of every backend and mode.
 //! - `frcd calibrate [-o FILE]`: measures the scheduler's cost model on this machine.
 
+mod clearance;
+mod clearance_run;
 mod commands;
+mod plot;
 #[cfg(feature = "gpu")]
 mod render;
 
@@ -124,6 +129,20 @@ enum Command {
         /// Print the body pairs that take the most narrow-phase time.
         #[arg(long)]
         pair_times: bool,
+        /// Clearance threshold (scene units, e.g. metres): every checked body pair closer than
+        /// this reports its distance, closest points and triangle pair each frame (interfering
+        /// pairs: 0). Replaces the scene's "clearance"; its per-pair "clearances" stay.
+        #[arg(long, value_name = "DISTANCE", allow_negative_numbers = true)]
+        clearance: Option<f64>,
+        /// Write an SVG plot of clearance against frame per body pair here.
+        #[arg(long, value_name = "OUT.svg")]
+        plot_clearance: Option<PathBuf>,
+        /// Plot only the pairs with a body whose name contains this (repeatable).
+        #[arg(long, value_name = "NAME")]
+        plot_pairs: Vec<String>,
+        /// Most points per pair in the plot (longer runs: the minimum per bin of frames).
+        #[arg(long, default_value_t = 1500)]
+        plot_points: usize,
     },
     /// Render one frame with the interfering triangles highlighted.
     Render {
@@ -233,6 +252,10 @@ fn main() -> ExitCode {
             count,
             quiet,
             pair_times,
+            clearance,
+            plot_clearance,
+            plot_pairs,
+            plot_points,
         } => commands::check(&commands::CheckRun {
             scene,
             checker,
@@ -244,6 +267,12 @@ fn main() -> ExitCode {
             quiet,
             pair_times,
             pairs,
+            clearance: clearance_run::ClearanceArgs {
+                threshold: clearance,
+                plot: plot_clearance,
+                plot_pairs,
+                plot_points,
+            },
         }),
         Command::Render {
             scene,

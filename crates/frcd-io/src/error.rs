@@ -158,6 +158,17 @@ pub enum Error {
         /// What is too large.
         msg: String,
     },
+    /// A clearance threshold is negative or not finite, or a per-pair threshold names a pair
+    /// that is never checked (one body twice, excluded, both static) or is given twice.
+    #[error("{}: {place}: bad clearance: {msg}", path.display())]
+    BadClearance {
+        /// The scene file.
+        path: PathBuf,
+        /// Where ("clearance", "clearances entry 2").
+        place: String,
+        /// What is wrong.
+        msg: String,
+    },
     /// Anything else a scene, trajectory or report file gets wrong (said in the message).
     #[error("{}: {msg}", path.display())]
     Invalid {
@@ -179,6 +190,7 @@ impl Error {
             | Error::DuplicateBody { path, .. }
             | Error::UnknownBody { path, .. }
             | Error::BadPose { path, .. }
+            | Error::BadClearance { path, .. }
             | Error::StaticBodyMoves { path, .. }
             | Error::Invalid { path, .. }
             | Error::NotAFile { path, .. }

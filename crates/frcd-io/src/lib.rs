@@ -10,7 +10,9 @@
 //! - **scenes**: a JSON file naming bodies, their meshes, static flags, excluded pairs and a
 //!   trajectory of poses, optionally extended by a CSV trajectory from a dynamics simulation
 //!   (`frame,body,x,y,z,qx,qy,qz,qw`); see [`Scene::load`] and [`SceneFile`];
-//! - **reports** of interference checks as JSON and CSV; see [`Report`].
+//! - **reports** of interference checks as JSON and CSV; see [`Report`]; clearance thresholds
+//!   (scene `"clearance"`, `"clearances"`: [`Clearances`]) and clearance records
+//!   ([`ClearanceRecord`], [`summarize_clearances`], [`clearance_csv`]).
 //!
 //! Every error is an [`Error`] that names the file and, where one exists, the line or the
 //! binary record at fault.
@@ -24,6 +26,8 @@
 //! ```
 #![warn(missing_docs)]
 
+mod clearance;
+mod clearance_report;
 mod error;
 mod fs;
 mod mesh;
@@ -32,6 +36,10 @@ mod scene;
 mod trajectory;
 mod write;
 
+pub use clearance::{ClearanceSpec, Clearances, check_clearance};
+pub use clearance_report::{
+    ClearanceRecord, ClearanceSummary, clearance_csv, summarize_clearances,
+};
 pub use error::{Error, Location};
 pub use fs::{
     Limits, MAX_FRAMES, MAX_JSON_BYTES, MAX_MESH_BYTES, MAX_SCENE_BYTES, MAX_TRAJECTORY_BYTES,

@@ -158,6 +158,12 @@ pub struct SceneFile {
     /// Per frame, the bodies that move.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub frames: Vec<FramePoses>,
+    /// Scene-wide clearance threshold (scene units; see [`crate::Clearances`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clearance: Option<f64>,
+    /// Per-pair clearance thresholds.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub clearances: Vec<crate::ClearanceSpec>,
 }
 
 impl SceneFile {
@@ -265,6 +271,7 @@ pub struct Scene {
     mesh_paths: Vec<PathBuf>,
     trajectory_paths: Vec<PathBuf>,
     exclude: Vec<(usize, usize)>,
+    clearances: crate::Clearances,
     /// Every pose given, sorted by (frame, body).
     keys: Vec<Key>,
     /// Per body, the positions in `keys` of its entries (ascending frame).
@@ -507,6 +514,8 @@ impl Scene {
         }
         exclude.sort_unstable();
         exclude.dedup();
+        let is_static: Vec<bool> = bodies.iter().map(|b| b.is_static).collect();
+        let clearances = crate::clearance::resolve(spec, path, &index, &is_static, &exclude)?;
 
         let max_frames = options.limits.frames.min(u32::MAX as u64);
         if spec.frames.len() as u64 > max_frames {
@@ -648,6 +657,7 @@ impl Scene {
             mesh_paths,
             trajectory_paths,
             exclude,
+            clearances,
             keys,
             by_body,
             frame_count,
@@ -695,6 +705,11 @@ impl Scene {
     /// The file each of [`Scene::meshes`] was loaded from.
     pub fn mesh_paths(&self) -> &[PathBuf] {
         &self.mesh_paths
+    }
+
+    /// The clearance thresholds the scene file sets (`"clearance"`, `"clearances"`).
+    pub fn clearances(&self) -> &crate::Clearances {
+        &self.clearances
     }
 
     /// Excluded pairs `(a, b)` with `a < b`, sorted.
