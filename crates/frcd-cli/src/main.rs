@@ -1,4 +1,5 @@
-#![forbid(unsafe_code)]
+// The one unsafe call (setting XDG_RUNTIME_DIR before any thread exists) is allowed locally.
+#![deny(unsafe_code)]
 //! `frcd`: interference checking of an assembly along a trajectory.
 //!
 //! - `frcd check SCENE [--backend cpu|gpgpu|image|hybrid] [--mode exact|fast] [--json OUT]
@@ -220,6 +221,7 @@ fn quiet_xdg_runtime_dir() {
         });
         if private {
             // SAFETY: called first thing in main, before any other thread exists.
+            #[allow(unsafe_code)]
             unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
         }
     }
