@@ -26,13 +26,6 @@ fuzz_target!(|data: &[u8]| {
         let mut c = [0.0; 3];
         for x in &mut c {
             *x = f64::from_bits(words.next().unwrap_or(0));
-            // Known issue (found by this target, regressions/mesh_tree/subnormal_points): with
-            // subnormal coordinates the OBB padding and the SAT slack, both relative, do not
-            // cover the absolute rounding of subnormal arithmetic and the tree drops pairs.
-            // Flushed here so the target keeps looking for other failures; remove once fixed.
-            if x.is_subnormal() {
-                *x = 0.0;
-            }
         }
         vertices.push(DVec3::from_array(c));
     }

@@ -1,6 +1,10 @@
 use crate::Pose;
 use glam::{DMat3, DVec3};
 
+/// Absolute floor added to every rounding slack of the bounding volumes: 2^-1000, far above
+/// the absolute error of subnormal arithmetic (a few 2^-1074) and negligible at any normal scale.
+pub const ABSOLUTE_SLACK: f64 = 9.332636185032189e-302;
+
 /// An axis-aligned box `[min, max]` (closed). An empty box has `min > max`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -251,7 +255,10 @@ impl Obb {
         // reconstruction and of the containment test's own projection: a few ulp of the largest
         // point magnitude, generously.
         let mag = point_mag.max(lo.abs().max(hi.abs()).max_element());
-        let slack = mag * (32.0 * f64::EPSILON);
+        // Relative rounding does not cover subnormal arithmetic, whose error is absolute
+        // (2^-1074 per operation): the floor covers it with room to spare and is invisible at
+        // any normal magnitude.
+        let slack = mag * (32.0 * f64::EPSILON) + ABSOLUTE_SLACK;
         Self {
             center: axes * mid,
             axes,
@@ -268,7 +275,7 @@ impl Obb {
             self.axes.z_axis.abs(),
         );
         let e = abs * self.half_extents;
-        let slack = (self.center.abs() + e) * (8.0 * f64::EPSILON);
+        let slack = (self.center.abs() + e) * (8.0 * f64::EPSILON) + DVec3::splat(ABSOLUTE_SLACK);
         Aabb::new(self.center - e - slack, self.center + e + slack)
     }
 

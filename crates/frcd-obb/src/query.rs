@@ -173,7 +173,9 @@ impl RelativeFrame {
 
 /// Separation margin of a query: see the `sat` module's error bound.
 pub(crate) fn query_slack(a: &ObbTree, b: &ObbTree, frame: &RelativeFrame) -> f64 {
+    // The absolute floor covers subnormal coordinates, whose rounding is absolute.
     SLACK_REL * (a.radius_from_origin + b.radius_from_origin + frame.t.length())
+        + frcd_geom::ABSOLUTE_SLACK
 }
 
 /// One entry of a traversal front: a node pair where a traversal stopped (the entries of a
