@@ -19,6 +19,7 @@
 //! same f64 operations ([`RelativeFrame`]).
 #![warn(missing_docs)]
 
+pub mod distance;
 pub mod oracle;
 mod query;
 mod sat;

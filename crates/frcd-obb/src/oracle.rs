@@ -15,8 +15,11 @@
 //! assert!(pairs.windows(2).all(|w| w[0] < w[1]));
 //! ```
 
+#[path = "oracle_distance.rs"]
+mod distance_oracle;
 use crate::query::{Containment, RelativeFrame};
 use crate::solid::point_inside;
+pub use distance_oracle::*;
 use frcd_geom::{Aabb, DVec3, Pose, TriMesh, Triangle};
 use frcd_tritri::Method;
 

@@ -1,0 +1,146 @@
+//! Closest points of two triangles in floating point (the leaf work of [`crate::distance`]).
+//!
+//! Two closed triangles that do not intersect have their closest pair among the 9 edge pairs
+//! (each edge pair's closest points, endpoints included) and the 6 vertex-face pairs whose
+//! projection falls inside the face; triangles that intersect are at distance 0 (decided by the
+//! exact tri-tri test, so a crossing pair is never reported at a positive distance).
+//!
+//! Every candidate is a pair of points computed as affine combinations of the triangles'
+//! vertices with parameters clamped to the triangles, so each candidate's length is the
+//! distance of two points within a few ulps of the triangles: the minimum can only be larger
+//! than the true distance by the error of the winning candidate (see [`crate::distance`] for
+//! the bound).
+
+use frcd_geom::DVec3;
+
+/// Closest points of two segments `[p1, q1]`, `[p2, q2]` (Ericson, Real-Time Collision Detection
+/// §5.1.9, with the denominator taken as `|d1 × d2|²`, which keeps its precision when the
+/// segments are nearly parallel). Returns `(squared distance, point on 1, point on 2)`.
+#[inline]
+pub(crate) fn segment_segment(p1: DVec3, q1: DVec3, p2: DVec3, q2: DVec3) -> (f64, DVec3, DVec3) {
+    let d1 = q1 - p1;
+    let d2 = q2 - p2;
+    let r = p1 - p2;
+    let a = d1.dot(d1);
+    let e = d2.dot(d2);
+    let f = d2.dot(r);
+    let (s, t);
+    if a == 0.0 && e == 0.0 {
+        s = 0.0;
+        t = 0.0;
+    } else if a == 0.0 {
+        s = 0.0;
+        t = (f / e).clamp(0.0, 1.0);
+    } else {
+        let c = d1.dot(r);
+        if e == 0.0 {
+            t = 0.0;
+            s = (-c / a).clamp(0.0, 1.0);
+        } else {
+            let b = d1.dot(d2);
+            let denom = d1.cross(d2).length_squared();
+            let s0 = if denom > 0.0 {
+                ((b * f - c * e) / denom).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let t0 = (b * s0 + f) / e;
+            if t0 < 0.0 {
+                t = 0.0;
+                s = (-c / a).clamp(0.0, 1.0);
+            } else if t0 > 1.0 {
+                t = 1.0;
+                s = ((b - c) / a).clamp(0.0, 1.0);
+            } else {
+                t = t0;
+                s = s0;
+            }
+        }
+    }
+    let c1 = p1 + d1 * s;
+    let c2 = p2 + d2 * t;
+    ((c1 - c2).length_squared(), c1, c2)
+}
+
+/// The face part of a vertex-face test: when the projection of `p` onto the plane of `t`
+/// lies in the closed triangle, `Some((squared distance, foot))`. Degenerate (zero-area)
+/// triangles return `None`: they are the union of their edges, which the edge pairs cover.
+#[inline]
+fn point_face(p: DVec3, t: &[DVec3; 3], n: DVec3, nn: f64) -> Option<(f64, DVec3)> {
+    if nn.is_nan() || nn <= 0.0 {
+        return None;
+    }
+    let [a, b, c] = *t;
+    if (b - a).cross(p - a).dot(n) < 0.0
+        || (c - b).cross(p - b).dot(n) < 0.0
+        || (a - c).cross(p - c).dot(n) < 0.0
+    {
+        return None;
+    }
+    let h = (p - a).dot(n);
+    let d2 = h * h / nn;
+    Some((d2, p - n * (h / nn)))
+}
+
+/// Closest points of two triangles (both in the same frame), ignoring intersection: the minimum
+/// over the 9 edge pairs and the 6 vertex-face projections. Returns
+/// `(squared distance, point on a, point on b)`. The caller decides intersection separately.
+pub(crate) fn triangle_features(a: &[DVec3; 3], b: &[DVec3; 3]) -> (f64, DVec3, DVec3) {
+    let mut best = (f64::INFINITY, a[0], b[0]);
+    for i in 0..3 {
+        let (p1, q1) = (a[i], a[(i + 1) % 3]);
+        for j in 0..3 {
+            let r = segment_segment(p1, q1, b[j], b[(j + 1) % 3]);
+            if r.0 < best.0 {
+                best = r;
+            }
+        }
+    }
+    let na = (a[1] - a[0]).cross(a[2] - a[0]);
+    let nna = na.length_squared();
+    for &p in b {
+        if let Some((d2, foot)) = point_face(p, a, na, nna) {
+            if d2 < best.0 {
+                best = (d2, foot, p);
+            }
+        }
+    }
+    let nb = (b[1] - b[0]).cross(b[2] - b[0]);
+    let nnb = nb.length_squared();
+    for &p in a {
+        if let Some((d2, foot)) = point_face(p, b, nb, nnb) {
+            if d2 < best.0 {
+                best = (d2, p, foot);
+            }
+        }
+    }
+    best
+}
+
+/// Closest points of two triangles: `(distance, point on a, point on b)`; distance 0 with a point
+/// of the intersection when they intersect (exact test).
+pub(crate) fn triangle_distance(a: &[DVec3; 3], b: &[DVec3; 3]) -> (f64, DVec3, DVec3) {
+    let ta = frcd_geom::Triangle { v: *a };
+    let tb = frcd_geom::Triangle { v: *b };
+    if frcd_tritri::exact(&ta, &tb) {
+        let p = contact_point(&ta, &tb);
+        return (0.0, p, p);
+    }
+    let (d2, pa, pb) = triangle_features(a, b);
+    (d2.sqrt(), pa, pb)
+}
+
+/// A point where two intersecting triangles meet.
+pub(crate) fn contact_point(a: &frcd_geom::Triangle, b: &frcd_geom::Triangle) -> DVec3 {
+    match frcd_tritri::intersection_segment(a, b) {
+        Some(frcd_tritri::Contact::Point(p)) => p,
+        Some(frcd_tritri::Contact::Segment(p, q)) => (p + q) * 0.5,
+        Some(frcd_tritri::Contact::Polygon(ps)) if !ps.is_empty() => ps[0],
+        // The exact test said they meet: the closest feature pair is (within rounding) a
+        // common point.
+        _ => {
+            let (_, pa, pb) = triangle_features(&a.v, &b.v);
+            (pa + pb) * 0.5
+        }
+    }
+}
