@@ -2,14 +2,17 @@
 //! deterministic, parallel narrow phase whose results are borrowed from the [`World`].
 
 mod broad;
+mod clearance;
 mod handle;
 
+pub use clearance::{Clearance, pair_clearance};
 pub use handle::BodyId;
 
 use crate::query::{Collision, Containment, Counters, Mode, PairCache, Request, collide_cached};
 use crate::tree::ObbTree;
 use broad::BroadPhase;
 use frcd_geom::{Aabb, DVec3, Pose};
+use std::collections::BTreeMap;
 use std::sync::Arc;
 
 /// Why a [`World`] call was refused.
@@ -41,6 +44,12 @@ pub enum WorldError {
     SelfPair {
         /// The body.
         id: BodyId,
+    },
+    /// A clearance threshold that is negative or NaN.
+    #[error("clearance threshold {value} is not a number >= 0")]
+    InvalidClearance {
+        /// The value given.
+        value: f64,
     },
     /// More than `u32::MAX` body slots.
     #[error("the world holds the maximum number of bodies ({max})")]
@@ -98,6 +107,10 @@ pub struct BodyContact<'w> {
 pub struct StepReport<'w> {
     /// Interfering body pairs, sorted by slot index `(a, b)`; identical for any thread count.
     pub contacts: Vec<BodyContact<'w>>,
+    /// With a clearance threshold ([`World::set_clearance`], [`World::set_pair_clearance`]):
+    /// every pair within its threshold, interfering pairs included (distance 0), sorted like
+    /// `contacts`.
+    pub clearances: &'w [Clearance],
     /// Body pairs the narrow phase looked at: world boxes overlap, not both static, not excluded.
     pub candidates: usize,
     /// Candidate pairs answered from the previous step because neither pose changed.
@@ -119,6 +132,8 @@ pub(crate) struct Body {
     pub(crate) aabb: Aabb,
     /// Pairs never tested, by partner (few per body).
     excluded: Vec<BodyId>,
+    /// Per-pair clearance thresholds, by partner.
+    thresholds: Vec<(BodyId, f64)>,
 }
 
 #[derive(Debug)]
@@ -131,7 +146,12 @@ struct Slot {
 struct PairState {
     versions: (u64, u64),
     epochs: (u32, u32),
+    /// The threshold of the last answer (`None`: no clearance asked).
+    threshold: Option<f64>,
+    answered: bool,
+    /// The collision answer (`None` when the raw boxes did not overlap: no interference).
     result: Option<Collision>,
+    clearance: Option<Clearance<()>>,
     cache: PairCache,
 }
 
@@ -140,7 +160,10 @@ impl PairState {
         Self {
             versions: (u64::MAX, u64::MAX),
             epochs: (0, 0),
+            threshold: None,
+            answered: false,
             result: None,
+            clearance: None,
             cache: PairCache::new(),
         }
     }
@@ -150,6 +173,9 @@ impl PairState {
 struct PairEntry {
     a: BodyId,
     b: BodyId,
+    /// The raw world boxes overlap: the collision query runs.
+    overlap: bool,
+    threshold: Option<f64>,
     state: PairState,
 }
 
@@ -207,6 +233,12 @@ pub struct World {
     pairs: Vec<PairEntry>,
     /// Indices into `pairs` of the interfering pairs of the last step.
     contacts: Vec<u32>,
+    clearances: Vec<Clearance>,
+    /// The world's clearance threshold.
+    clearance: Option<f64>,
+    /// Multiset of the per-pair thresholds (f64 bits of values >= 0, which order like the
+    /// values), for the broad phase's margin.
+    thresholds: BTreeMap<u64, usize>,
     stats: StepStats,
     #[cfg(feature = "parallel")]
     pool: Option<Arc<rayon::ThreadPool>>,
@@ -232,6 +264,9 @@ impl World {
             broad: BroadPhase::default(),
             pairs: Vec::new(),
             contacts: Vec::new(),
+            clearances: Vec::new(),
+            clearance: None,
+            thresholds: BTreeMap::new(),
             stats: StepStats::default(),
             #[cfg(feature = "parallel")]
             pool: None,
@@ -338,6 +373,7 @@ impl World {
             epoch: 0,
             aabb,
             excluded: Vec::new(),
+            thresholds: Vec::new(),
         };
         if self.free.pop().is_some() {
             self.slots[index as usize].body = Some(body);
@@ -368,6 +404,12 @@ impl World {
             if let Ok(o) = self.get_mut(*other) {
                 o.excluded.retain(|x| *x != id);
             }
+        }
+        for &(other, t) in &body.thresholds {
+            if let Ok(o) = self.get_mut(other) {
+                o.thresholds.retain(|x| x.0 != id);
+            }
+            self.forget_threshold(t);
         }
         self.broad.remove(id.index());
         Ok(body.tree)
@@ -445,6 +487,86 @@ impl World {
         Ok(())
     }
 
+    /// Clearance threshold of every tested pair without its own (`None`: no clearance, the
+    /// default). Pairs within it are reported in [`StepReport::clearances`] each step.
+    pub fn set_clearance(&mut self, threshold: Option<f64>) -> Result<(), WorldError> {
+        if let Some(value) = threshold.filter(|t| !(*t >= 0.0)) {
+            return Err(WorldError::InvalidClearance { value });
+        }
+        self.clearance = threshold.map(|t| t + 0.0);
+        Ok(())
+    }
+
+    /// The world's clearance threshold.
+    pub fn clearance(&self) -> Option<f64> {
+        self.clearance
+    }
+
+    /// Clearance threshold of one pair, overriding the world's (`None`: back to the world's).
+    pub fn set_pair_clearance(
+        &mut self,
+        a: BodyId,
+        b: BodyId,
+        threshold: Option<f64>,
+    ) -> Result<(), WorldError> {
+        self.get(a)?;
+        self.get(b)?;
+        if a == b {
+            return Err(WorldError::SelfPair { id: a });
+        }
+        if let Some(value) = threshold.filter(|t| !(*t >= 0.0)) {
+            return Err(WorldError::InvalidClearance { value });
+        }
+        if let Some(&(_, old)) = self.get(a)?.thresholds.iter().find(|x| x.0 == b) {
+            self.forget_threshold(old);
+            self.get_mut(a)?.thresholds.retain(|x| x.0 != b);
+            self.get_mut(b)?.thresholds.retain(|x| x.0 != a);
+        }
+        if let Some(t) = threshold.map(|t| t + 0.0) {
+            *self.thresholds.entry(t.to_bits()).or_insert(0) += 1;
+            self.get_mut(a)?.thresholds.push((b, t));
+            self.get_mut(b)?.thresholds.push((a, t));
+        }
+        Ok(())
+    }
+
+    fn forget_threshold(&mut self, t: f64) {
+        let k = t.to_bits();
+        if let Some(c) = self.thresholds.get_mut(&k) {
+            *c -= 1;
+            if *c == 0 {
+                self.thresholds.remove(&k);
+            }
+        }
+    }
+
+    /// The clearance threshold of a pair: its own, else the world's.
+    pub fn pair_clearance_threshold(&self, a: BodyId, b: BodyId) -> Option<f64> {
+        let (ba, bb) = (self.get(a).ok()?, self.get(b).ok()?);
+        let (list, other) = if ba.thresholds.len() <= bb.thresholds.len() {
+            (&ba.thresholds, b)
+        } else {
+            (&bb.thresholds, a)
+        };
+        list.iter()
+            .find(|x| x.0 == other)
+            .map(|x| x.1)
+            .or(self.clearance)
+    }
+
+    /// The largest clearance threshold of any pair (the broad phase's margin).
+    pub fn max_clearance(&self) -> Option<f64> {
+        let own = self
+            .thresholds
+            .keys()
+            .next_back()
+            .map(|&k| f64::from_bits(k));
+        match (own, self.clearance) {
+            (Some(x), Some(y)) => Some(x.max(y)),
+            (x, y) => x.or(y),
+        }
+    }
+
     fn is_excluded(&self, a: BodyId, b: BodyId) -> bool {
         let (Ok(ba), Ok(bb)) = (self.get(a), self.get(b)) else {
             return false;
@@ -492,12 +614,24 @@ impl World {
     /// Advances one step: broad phase, then the narrow phase on the candidate pairs whose poses
     /// changed since their last answer. The report borrows the world.
     pub fn step(&mut self) -> StepReport<'_> {
-        let cands = self.overlapping_pairs(0.0);
+        let margin = self.max_clearance().unwrap_or(0.0);
+        let cands = self.overlapping_pairs(margin);
         // Merge last step's states (sorted like `cands`) into this step's work list.
         let old = std::mem::take(&mut self.pairs);
         let mut old = old.into_iter().peekable();
         let mut work: Vec<PairEntry> = Vec::with_capacity(cands.len());
         for (a, b) in cands {
+            let (ba, bb) = (self.slot_body(a.index()), self.slot_body(b.index()));
+            let overlap = ba.aabb.intersects(&bb.aabb);
+            let threshold = if margin > 0.0 || self.clearance.is_some() {
+                self.pair_clearance_threshold(a, b)
+            } else {
+                None
+            };
+            // Boxes farther apart than the pair's threshold: nothing to ask.
+            if !overlap && threshold.is_none_or(|t| box_gap(&ba.aabb, &bb.aabb) > t) {
+                continue;
+            }
             let key = (a.index(), b.index());
             let mut state = None;
             while let Some(e) = old.peek() {
@@ -514,6 +648,8 @@ impl World {
             work.push(PairEntry {
                 a,
                 b,
+                overlap,
+                threshold,
                 state: state.unwrap_or_else(PairState::new),
             });
         }
@@ -526,23 +662,41 @@ impl World {
             let st = &mut e.state;
             let versions = (ba.version, bb.version);
             let epochs = (ba.epoch, bb.epoch);
-            if st.result.is_some() && st.versions == versions {
+            if st.answered && st.versions == versions && st.threshold == e.threshold {
                 return true;
             }
             if !options.coherence || st.epochs != epochs {
                 st.cache.clear();
             }
-            let c = collide_cached(
-                &ba.tree,
-                &ba.pose,
-                &bb.tree,
-                &bb.pose,
-                &options.request,
-                &mut st.cache,
-            );
+            st.result = e.overlap.then(|| {
+                collide_cached(
+                    &ba.tree,
+                    &ba.pose,
+                    &bb.tree,
+                    &bb.pose,
+                    &options.request,
+                    &mut st.cache,
+                )
+            });
+            st.clearance = e.threshold.and_then(|t| {
+                let (witness, interfering) = st
+                    .result
+                    .as_ref()
+                    .map_or((None, false), |c| (c.witness, c.collide));
+                pair_clearance(
+                    &ba.tree,
+                    &ba.pose,
+                    &bb.tree,
+                    &bb.pose,
+                    t,
+                    witness,
+                    interfering,
+                )
+            });
             st.versions = versions;
             st.epochs = epochs;
-            st.result = Some(c);
+            st.threshold = e.threshold;
+            st.answered = true;
             false
         };
         #[cfg(feature = "parallel")]
@@ -560,15 +714,21 @@ impl World {
             ..StepStats::default()
         };
         self.contacts.clear();
+        self.clearances.clear();
         for (i, (e, reused)) in work.iter().zip(reused).enumerate() {
-            let c = e.state.result.as_ref().expect("answered above");
             if reused {
                 stats.reused += 1;
-            } else {
-                stats.counters += c.counters;
             }
-            if c.collide {
-                self.contacts.push(i as u32);
+            if let Some(c) = &e.state.result {
+                if !reused {
+                    stats.counters += c.counters;
+                }
+                if c.collide {
+                    self.contacts.push(i as u32);
+                }
+            }
+            if let Some(c) = e.state.clearance {
+                self.clearances.push(c.with_ids(e.a, e.b));
             }
         }
         self.pairs = work;
@@ -583,7 +743,11 @@ impl World {
             .iter()
             .map(|&i| {
                 let e = &self.pairs[i as usize];
-                let c = e.state.result.as_ref().expect("answered");
+                let c = e
+                    .state
+                    .result
+                    .as_ref()
+                    .expect("interfering pairs ran the query");
                 BodyContact {
                     a: e.a,
                     b: e.b,
@@ -595,6 +759,7 @@ impl World {
             .collect();
         StepReport {
             contacts,
+            clearances: &self.clearances,
             candidates: self.stats.candidates,
             reused: self.stats.reused,
             counters: self.stats.counters,
@@ -610,4 +775,11 @@ impl World {
     pub fn body_center(&self, id: BodyId) -> Option<DVec3> {
         self.body_aabb(id).map(|b| b.center())
     }
+}
+
+/// Euclidean distance between two boxes (0 when they overlap): a lower bound of the distance of
+/// anything inside them.
+fn box_gap(a: &Aabb, b: &Aabb) -> f64 {
+    let d = (a.min - b.max).max(b.min - a.max).max(DVec3::ZERO);
+    d.length()
 }

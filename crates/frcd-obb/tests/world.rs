@@ -219,3 +219,97 @@ fn overlapping_pairs_with_a_margin_keep_every_close_pair() {
     assert!(w.overlapping_pairs(0.29).is_empty());
     assert_eq!(w.overlapping_pairs(0.31), vec![(a, b)]);
 }
+
+/// Clearance against the brute-force oracle: every pair within its threshold (world threshold,
+/// one pair with its own) is reported with the oracle's distance, interfering pairs with 0, and
+/// no other pair.
+#[test]
+fn clearance_matches_the_oracle() {
+    let meshes: Vec<TriMesh> = vec![
+        shapes::icosphere(1.0, 1),
+        shapes::cuboid(DVec3::new(1.5, 0.3, 0.3)),
+    ];
+    let trees: Vec<Arc<ObbTree>> = meshes
+        .iter()
+        .map(|m| Arc::new(ObbTree::build(m, &BuildOptions::default())))
+        .collect();
+    let mut rng = StdRng::seed_from_u64(5);
+    let mut w = World::new(WorldOptions::default());
+    assert!(matches!(
+        w.set_clearance(Some(-1.0)),
+        Err(WorldError::InvalidClearance { .. })
+    ));
+    let threshold = 0.4;
+    w.set_clearance(Some(threshold)).unwrap();
+    let mut ids = Vec::new();
+    for i in 0..14 {
+        let id = w
+            .add_body(trees[i % 2].clone(), random_pose(&mut rng, 3.5), i == 0)
+            .unwrap();
+        ids.push(id);
+    }
+    w.set_pair_clearance(ids[1], ids[2], Some(3.0)).unwrap();
+    w.set_pair_clearance(ids[3], ids[4], Some(0.0)).unwrap();
+    let (mut close, mut touching) = (0, 0);
+    for step in 0..4 {
+        for (k, &id) in ids.iter().enumerate().skip(1) {
+            let p = w.pose(id).unwrap();
+            let q = Pose::new(
+                p.translation + DVec3::new(0.1, -0.1, 0.05) * ((k + step) % 3) as f64,
+                p.rotation * DQuat::from_rotation_x(0.2),
+            );
+            w.set_pose(id, q).unwrap();
+        }
+        let got: Vec<_> = w.step().clearances.to_vec();
+        let mut expected = Vec::new();
+        for i in 0..ids.len() {
+            for j in i + 1..ids.len() {
+                let t = match (i, j) {
+                    (1, 2) => 3.0,
+                    (3, 4) => 0.0,
+                    _ => threshold,
+                };
+                let (pa, pb) = (w.pose(ids[i]).unwrap(), w.pose(ids[j]).unwrap());
+                let (ma, mb) = (&meshes[i % 2], &meshes[j % 2]);
+                let d = oracle::distance(ma, &pa, mb, &pb);
+                let hit = !oracle::pairs(ma, &pa, mb, &pb).is_empty();
+                if (d.distance - t).abs() < 1e-9 {
+                    // Too close to the threshold for a float oracle: the exact one decides.
+                    if !hit && !oracle::within_exact(ma, &pa, mb, &pb, t) {
+                        continue;
+                    }
+                } else if !hit && d.distance > t {
+                    continue;
+                }
+                expected.push((i, j, if hit { 0.0 } else { d.distance }, hit));
+            }
+        }
+        assert_eq!(
+            got.len(),
+            expected.len(),
+            "step {step}: {got:?} vs {expected:?}"
+        );
+        for (g, e) in got.iter().zip(&expected) {
+            assert_eq!((g.a, g.b), (ids[e.0], ids[e.1]));
+            assert_eq!(g.interfering, e.3);
+            assert!((g.distance - e.2).abs() < 1e-12, "{g:?} vs {e:?}");
+            // The points lie on the reported triangles, as far apart as reported.
+            let (pa, pb) = (w.pose(g.a).unwrap(), w.pose(g.b).unwrap());
+            let ta = meshes[e.0 % 2].triangle(g.triangles.0 as usize);
+            let tb = meshes[e.1 % 2].triangle(g.triangles.1 as usize);
+            let qa = pa.inverse().transform_point(g.points[0]);
+            let qb = pb.inverse().transform_point(g.points[1]);
+            let on = |t: &frcd_geom::Triangle, q: DVec3| {
+                let c = oracle::closest_point_on_triangle(q, t.v[0], t.v[1], t.v[2]);
+                (c - q).length() < 1e-9
+            };
+            assert!(on(&ta, qa) && on(&tb, qb), "{g:?}");
+            if !g.interfering {
+                assert!(((g.points[0] - g.points[1]).length() - g.distance).abs() < 1e-9);
+            }
+            close += 1;
+            touching += g.interfering as usize;
+        }
+    }
+    assert!(close > touching && touching > 0, "{close} {touching}");
+}
