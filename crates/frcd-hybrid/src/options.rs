@@ -61,7 +61,7 @@ impl Backend {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
 pub enum GpuPolicy {
     /// Use one when the scene needs it and one is found; otherwise the CPU (noted in
-    /// [`Checker::notes`]).
+    /// [`crate::Checker::notes`]).
     #[default]
     Auto,
     /// Never create a GPU device.
