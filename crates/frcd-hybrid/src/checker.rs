@@ -62,7 +62,7 @@ impl Checker {
             }
             excluded.insert((a.min(b) as u32, a.max(b) as u32));
         }
-        if let Some(value) = options.clearance.filter(|t| !(*t >= 0.0)) {
+        if let Some(value) = options.clearance.filter(|t| t.is_nan() || *t < 0.0) {
             return Err(HybridError::BadClearance {
                 a: usize::MAX,
                 b: usize::MAX,
@@ -71,7 +71,7 @@ impl Checker {
             });
         }
         for &((a, b), value) in &options.pair_clearances {
-            if a >= count || b >= count || a == b || !(value >= 0.0) {
+            if a >= count || b >= count || a == b || value.is_nan() || value < 0.0 {
                 return Err(HybridError::BadClearance { a, b, value, count });
             }
         }

@@ -490,7 +490,7 @@ impl World {
     /// Clearance threshold of every tested pair without its own (`None`: no clearance, the
     /// default). Pairs within it are reported in [`StepReport::clearances`] each step.
     pub fn set_clearance(&mut self, threshold: Option<f64>) -> Result<(), WorldError> {
-        if let Some(value) = threshold.filter(|t| !(*t >= 0.0)) {
+        if let Some(value) = threshold.filter(|t| t.is_nan() || *t < 0.0) {
             return Err(WorldError::InvalidClearance { value });
         }
         self.clearance = threshold.map(|t| t + 0.0);
@@ -514,7 +514,7 @@ impl World {
         if a == b {
             return Err(WorldError::SelfPair { id: a });
         }
-        if let Some(value) = threshold.filter(|t| !(*t >= 0.0)) {
+        if let Some(value) = threshold.filter(|t| t.is_nan() || *t < 0.0) {
             return Err(WorldError::InvalidClearance { value });
         }
         if let Some(&(_, old)) = self.get(a)?.thresholds.iter().find(|x| x.0 == b) {
