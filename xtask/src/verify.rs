@@ -291,9 +291,9 @@ impl Backend for ObbWorld {
                     .contacts
                     .into_iter()
                     .map(|c| PairAnswer {
-                        a: c.a.0 as usize,
-                        b: c.b.0 as usize,
-                        pairs: Some(c.pairs),
+                        a: c.a.index() as usize,
+                        b: c.b.index() as usize,
+                        pairs: Some(c.pairs.to_vec()),
                         witness: c.witness,
                         contained: c.contained.is_some(),
                     })

@@ -307,7 +307,9 @@ fn exact_gpgpu_and_gpu_heavy_hybrid_equal_oracle() {
         return;
     }
     let (want, got, checker) = match run(&s, forced) {
-        Err(HybridError::Gpu { message, .. }) if !gpu_required() => {
+        Err(HybridError::Gpu {
+            source: message, ..
+        }) if !gpu_required() => {
             println!("SKIP exact_gpgpu: no GPU adapter ({message})");
             return;
         }
@@ -369,7 +371,9 @@ fn fast_mode_reports_only_true_interference() {
         return;
     }
     let (want, got, checker) = match run(&s, options) {
-        Err(HybridError::Gpu { message, .. }) if !gpu_required() => {
+        Err(HybridError::Gpu {
+            source: message, ..
+        }) if !gpu_required() => {
             println!("SKIP fast_mode: no GPU adapter ({message})");
             return;
         }

@@ -40,4 +40,6 @@ pub use query::{
     collide_cached,
 };
 pub use tree::{BuildOptions, Node, ObbTree};
-pub use world::{BodyContact, BodyId, StepReport, World, WorldError, WorldOptions};
+pub use world::{
+    BodyContact, BodyId, Clearance, StepReport, World, WorldError, WorldOptions, pair_clearance,
+};

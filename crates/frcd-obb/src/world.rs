@@ -1,34 +1,61 @@
-//! Many bodies: incremental sweep-and-prune broad phase, cached and parallel narrow phase.
+//! Many bodies: generational handles, an incremental sweep-and-prune broad phase, and a cached,
+//! deterministic, parallel narrow phase whose results are borrowed from the [`World`].
+
+mod broad;
+mod clearance;
+mod handle;
+
+pub use clearance::{Clearance, pair_clearance};
+pub use handle::BodyId;
 
 use crate::query::{Collision, Containment, Counters, Mode, PairCache, Request, collide_cached};
 use crate::tree::ObbTree;
+use broad::BroadPhase;
 use frcd_geom::{Aabb, DVec3, Pose};
-use std::collections::{HashMap, HashSet};
+use std::collections::BTreeMap;
 use std::sync::Arc;
-
-/// A body's handle in a [`World`] (its insertion index).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
-pub struct BodyId(pub u32);
 
 /// Why a [`World`] call was refused.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
 pub enum WorldError {
-    /// No body has this id.
-    #[error("no body {id} (the world has {count})")]
+    /// The handle names a body that was removed (or never existed in this world).
+    #[error("{id} is not in the world (removed, or its slot was reused)")]
     UnknownBody {
-        /// The id given.
-        id: u32,
-        /// Number of bodies.
-        count: usize,
+        /// The handle given.
+        id: BodyId,
+    },
+    /// The handle was made by another [`World`].
+    #[error("{id} belongs to another world")]
+    ForeignBody {
+        /// The handle given.
+        id: BodyId,
     },
     /// A pose with a non-finite value or a rotation that is not a unit quaternion.
-    #[error("invalid pose for body {id}: {pose:?}")]
+    #[error("invalid pose for {id}: {pose:?} (not finite, or not a unit rotation)")]
     InvalidPose {
-        /// The body.
-        id: u32,
+        /// The body (for [`World::add_body`], the handle it would have had).
+        id: BodyId,
         /// The pose given.
         pose: Pose,
+    },
+    /// A body paired with itself.
+    #[error("{id} paired with itself")]
+    SelfPair {
+        /// The body.
+        id: BodyId,
+    },
+    /// A clearance threshold that is negative or NaN.
+    #[error("clearance threshold {value} is not a number >= 0")]
+    InvalidClearance {
+        /// The value given.
+        value: f64,
+    },
+    /// More than `u32::MAX` body slots.
+    #[error("the world holds the maximum number of bodies ({max})")]
+    TooManyBodies {
+        /// The limit.
+        max: usize,
     },
 }
 
@@ -41,7 +68,8 @@ pub struct WorldOptions {
     /// Keep a [`PairCache`] per body pair (temporal coherence).
     pub coherence: bool,
     /// A full re-sort of the broad phase happens when an insertion sort would make more than
-    /// `resort_factor · n` swaps (incoherent motion), besides after [`World::teleport`].
+    /// `resort_factor · n` swaps (incoherent motion). Teleported and added bodies are merged in
+    /// separately and never trigger it.
     pub resort_factor: u32,
 }
 
@@ -58,27 +86,32 @@ impl Default for WorldOptions {
     }
 }
 
-/// Two bodies that interfere, with their triangle pairs.
-#[derive(Clone, Debug, PartialEq)]
-pub struct BodyContact {
-    /// The lower body id.
+/// Two bodies that interfere, borrowed from the [`World`] that found them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BodyContact<'w> {
+    /// The body with the lower slot index.
     pub a: BodyId,
-    /// The higher body id.
+    /// The body with the higher slot index.
     pub b: BodyId,
     /// Touching triangle pairs `(tri of a, tri of b)`, sorted (empty in first-contact mode).
-    pub pairs: Vec<(u32, u32)>,
+    pub pairs: &'w [(u32, u32)],
     /// A touching pair, when there is one.
     pub witness: Option<(u32, u32)>,
     /// Solid mode: containment when no surface pair touches.
     pub contained: Option<Containment>,
 }
 
-/// What a [`World::step`] found and how much work it took.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct StepReport {
-    /// Interfering body pairs, sorted by `(a, b)`; identical for any thread count.
-    pub contacts: Vec<BodyContact>,
-    /// Body pairs whose world boxes overlap (after static/excluded filtering).
+/// What the last [`World::step`] found and how much work it took; borrows the world, so nothing
+/// is copied but the small per-contact headers.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepReport<'w> {
+    /// Interfering body pairs, sorted by slot index `(a, b)`; identical for any thread count.
+    pub contacts: Vec<BodyContact<'w>>,
+    /// With a clearance threshold ([`World::set_clearance`], [`World::set_pair_clearance`]):
+    /// every pair within its threshold, interfering pairs included (distance 0), sorted like
+    /// `contacts`.
+    pub clearances: &'w [Clearance],
+    /// Body pairs the narrow phase looked at: world boxes overlap, not both static, not excluded.
     pub candidates: usize,
     /// Candidate pairs answered from the previous step because neither pose changed.
     pub reused: usize,
@@ -86,28 +119,90 @@ pub struct StepReport {
     pub counters: Counters,
 }
 
-struct Body {
-    tree: Arc<ObbTree>,
-    pose: Pose,
-    is_static: bool,
+#[derive(Debug)]
+pub(crate) struct Body {
+    pub(crate) tree: Arc<ObbTree>,
+    pub(crate) pose: Pose,
+    pub(crate) is_static: bool,
+    /// Bumped on every pose change: a pair whose two versions are unchanged is not re-queried.
     version: u64,
-    aabb: Aabb,
+    /// Bumped on teleport: pair caches made before it are dropped.
+    epoch: u32,
+    /// Conservative world box.
+    pub(crate) aabb: Aabb,
+    /// Pairs never tested, by partner (few per body).
+    excluded: Vec<BodyId>,
+    /// Per-pair clearance thresholds, by partner.
+    thresholds: Vec<(BodyId, f64)>,
 }
 
+#[derive(Debug)]
+struct Slot {
+    generation: u32,
+    body: Option<Body>,
+}
+
+#[derive(Debug)]
 struct PairState {
     versions: (u64, u64),
+    epochs: (u32, u32),
+    /// The threshold of the last answer (`None`: no clearance asked).
+    threshold: Option<f64>,
+    answered: bool,
+    /// The collision answer (`None` when the raw boxes did not overlap: no interference).
     result: Option<Collision>,
+    clearance: Option<Clearance<()>>,
     cache: PairCache,
 }
 
-/// Bodies sharing trees through `Arc<ObbTree>`, poses updated per step, and a `step` that
-/// returns the interfering pairs.
+impl PairState {
+    fn new() -> Self {
+        Self {
+            versions: (u64::MAX, u64::MAX),
+            epochs: (0, 0),
+            threshold: None,
+            answered: false,
+            result: None,
+            clearance: None,
+            cache: PairCache::new(),
+        }
+    }
+}
+
+#[derive(Debug)]
+struct PairEntry {
+    a: BodyId,
+    b: BodyId,
+    /// The raw world boxes overlap: the collision query runs.
+    overlap: bool,
+    threshold: Option<f64>,
+    state: PairState,
+}
+
+#[derive(Debug, Default)]
+struct StepStats {
+    candidates: usize,
+    reused: usize,
+    counters: Counters,
+}
+
+/// Bodies sharing trees through `Arc<ObbTree>`, addressed by generational [`BodyId`] handles;
+/// poses updated one by one or in batches; [`World::step`] answers which bodies interfere.
 ///
-/// The broad phase sorts the bodies' world boxes by `min.x` and sweeps; the sort is an insertion
-/// sort on last step's order (near linear under coherent motion), replaced by a full sort after a
-/// teleport. Static-static pairs, excluded pairs and pairs whose poses did not change since their
-/// last answer are not queried again. The narrow phase runs on rayon's current pool with the
-/// default `parallel` feature; the result does not depend on the thread count.
+/// - **Handles** carry a slot index, a generation and the world's serial: a handle of a removed
+///   body, or of another world, is refused with a typed error, never silently aliased.
+/// - **Broad phase**: the bodies' world boxes sorted by `min.x` and swept. The sort is an
+///   insertion sort on last step's order (near linear under coherent motion) with a guard that
+///   switches to a full sort when it would exceed `resort_factor · n` swaps. [`World::teleport`]
+///   is O(1): the teleported bodies are taken out and merged back in at the next step, in
+///   O(n + k log k) for k teleports, and only their own pair caches are dropped (lazily, by an
+///   epoch, without scanning the pairs).
+/// - **Narrow phase**: static-static and excluded pairs are never queried; pairs whose two poses
+///   did not change since their last answer are answered from it. The other pairs run in
+///   parallel (default `parallel` feature) on the pool given to [`World::set_thread_pool`], or
+///   on the caller's current rayon pool; the result does not depend on the thread count.
+/// - **Results** are kept in the world and borrowed by the [`StepReport`]: no triangle pair list
+///   is cloned.
 ///
 /// ```
 /// use frcd_obb::{BuildOptions, ObbTree, World, WorldOptions};
@@ -115,27 +210,43 @@ struct PairState {
 /// use std::sync::Arc;
 /// let ball = Arc::new(ObbTree::build(&shapes::icosphere(1.0, 2), &BuildOptions::default()));
 /// let mut world = World::new(WorldOptions::default());
-/// let a = world.add_body(ball.clone(), Pose::IDENTITY, true).unwrap();
-/// let b = world
-///     .add_body(ball, Pose::from_translation(DVec3::new(5.0, 0.0, 0.0)), false)
-///     .unwrap();
+/// let a = world.add_body(ball.clone(), Pose::IDENTITY, true)?;
+/// let b = world.add_body(ball, Pose::from_translation(DVec3::new(5.0, 0.0, 0.0)), false)?;
 /// assert!(world.step().contacts.is_empty());
-/// world.set_pose(b, Pose::from_translation(DVec3::new(1.5, 0.0, 0.0))).unwrap();
+/// world.set_pose(b, Pose::from_translation(DVec3::new(1.5, 0.0, 0.0)))?;
 /// let report = world.step();
 /// assert_eq!((report.contacts[0].a, report.contacts[0].b), (a, b));
+/// assert!(!report.contacts[0].pairs.is_empty());
+/// world.remove_body(b)?;
+/// assert!(world.set_pose(b, Pose::IDENTITY).is_err()); // a stale handle is refused
+/// # Ok::<(), frcd_obb::WorldError>(())
 /// ```
+#[derive(Debug)]
 pub struct World {
     options: WorldOptions,
-    bodies: Vec<Body>,
-    excluded: HashSet<(u32, u32)>,
-    order: Vec<u32>,
-    resort: bool,
-    pairs: HashMap<(u32, u32), PairState>,
+    serial: u32,
+    slots: Vec<Slot>,
+    free: Vec<u32>,
+    live: usize,
+    broad: BroadPhase,
+    /// Candidate pairs of the last step with their states, sorted by `(a.index, b.index)`.
+    pairs: Vec<PairEntry>,
+    /// Indices into `pairs` of the interfering pairs of the last step.
+    contacts: Vec<u32>,
+    clearances: Vec<Clearance>,
+    /// The world's clearance threshold.
+    clearance: Option<f64>,
+    /// Multiset of the per-pair thresholds (f64 bits of values >= 0, which order like the
+    /// values), for the broad phase's margin.
+    thresholds: BTreeMap<u64, usize>,
+    stats: StepStats,
+    #[cfg(feature = "parallel")]
+    pool: Option<Arc<rayon::ThreadPool>>,
 }
 
 /// A conservative world box: the local box mapped by the pose, grown by a relative margin that
 /// covers the rounding of the pair queries' relative frames.
-fn world_box(tree: &ObbTree, pose: &Pose) -> Aabb {
+pub(crate) fn world_box(tree: &ObbTree, pose: &Pose) -> Aabb {
     let b = tree.aabb().transformed(pose);
     let mag = b.min.abs().max(b.max.abs()).max_element();
     b.inflated(mag * 1e-12 + f64::MIN_POSITIVE)
@@ -146,232 +257,529 @@ impl World {
     pub fn new(options: WorldOptions) -> Self {
         Self {
             options,
-            bodies: Vec::new(),
-            excluded: HashSet::new(),
-            order: Vec::new(),
-            resort: false,
-            pairs: HashMap::new(),
+            serial: handle::next_world_serial(),
+            slots: Vec::new(),
+            free: Vec::new(),
+            live: 0,
+            broad: BroadPhase::default(),
+            pairs: Vec::new(),
+            contacts: Vec::new(),
+            clearances: Vec::new(),
+            clearance: None,
+            thresholds: BTreeMap::new(),
+            stats: StepStats::default(),
+            #[cfg(feature = "parallel")]
+            pool: None,
         }
+    }
+
+    /// The options.
+    pub fn options(&self) -> &WorldOptions {
+        &self.options
+    }
+
+    /// Runs the narrow phase on this pool from now on (`None`: the caller's current rayon pool,
+    /// which is the global pool unless the caller is inside `ThreadPool::install`). A pool of
+    /// one thread makes the step sequential. The answers do not depend on the pool.
+    #[cfg(feature = "parallel")]
+    pub fn set_thread_pool(&mut self, pool: Option<Arc<rayon::ThreadPool>>) {
+        self.pool = pool;
     }
 
     /// Number of bodies.
     pub fn len(&self) -> usize {
-        self.bodies.len()
+        self.live
     }
 
     /// True when there are no bodies.
     pub fn is_empty(&self) -> bool {
-        self.bodies.is_empty()
+        self.live == 0
+    }
+
+    /// The handles of every body, by slot index.
+    pub fn bodies(&self) -> impl Iterator<Item = BodyId> + '_ {
+        self.slots.iter().enumerate().filter_map(|(i, s)| {
+            s.body
+                .as_ref()
+                .map(|_| BodyId::new(i as u32, s.generation, self.serial))
+        })
+    }
+
+    /// True when `id` names a body of this world.
+    pub fn contains(&self, id: BodyId) -> bool {
+        self.get(id).is_ok()
+    }
+
+    pub(crate) fn get(&self, id: BodyId) -> Result<&Body, WorldError> {
+        if id.world() != self.serial {
+            return Err(WorldError::ForeignBody { id });
+        }
+        match self.slots.get(id.index() as usize) {
+            Some(Slot {
+                generation,
+                body: Some(b),
+            }) if *generation == id.generation() => Ok(b),
+            _ => Err(WorldError::UnknownBody { id }),
+        }
+    }
+
+    fn get_mut(&mut self, id: BodyId) -> Result<&mut Body, WorldError> {
+        self.get(id)?;
+        Ok(self.slots[id.index() as usize]
+            .body
+            .as_mut()
+            .expect("checked above"))
+    }
+
+    /// Body in slot `i` (crate-internal; the slot must be live).
+    pub(crate) fn slot_body(&self, i: u32) -> &Body {
+        self.slots[i as usize].body.as_ref().expect("live slot")
+    }
+
+    fn handle(&self, i: u32) -> BodyId {
+        BodyId::new(i, self.slots[i as usize].generation, self.serial)
     }
 
     /// Adds a body; static bodies are never tested against each other. An invalid pose
-    /// (non-finite, or a rotation that is not a unit quaternion) is refused.
+    /// (non-finite, or a rotation that is not a unit quaternion) is refused. Slots of removed
+    /// bodies are reused with a new generation.
     pub fn add_body(
         &mut self,
         tree: Arc<ObbTree>,
         pose: Pose,
         is_static: bool,
     ) -> Result<BodyId, WorldError> {
-        let id = self.bodies.len() as u32;
+        let (index, generation) = match self.free.last() {
+            Some(&i) => (i, self.slots[i as usize].generation),
+            None => {
+                if self.slots.len() >= u32::MAX as usize {
+                    return Err(WorldError::TooManyBodies {
+                        max: u32::MAX as usize,
+                    });
+                }
+                (self.slots.len() as u32, 0)
+            }
+        };
+        let id = BodyId::new(index, generation, self.serial);
         if !pose.is_valid() {
             return Err(WorldError::InvalidPose { id, pose });
         }
         let aabb = world_box(&tree, &pose);
-        self.bodies.push(Body {
+        let body = Body {
             tree,
             pose,
             is_static,
             version: 0,
+            epoch: 0,
             aabb,
-        });
-        self.order.push(id);
-        self.resort = true;
-        Ok(BodyId(id))
-    }
-
-    fn body_mut(&mut self, id: BodyId, pose: &Pose) -> Result<&mut Body, WorldError> {
-        let count = self.bodies.len();
-        if !pose.is_valid() {
-            return Err(WorldError::InvalidPose {
-                id: id.0,
-                pose: *pose,
+            excluded: Vec::new(),
+            thresholds: Vec::new(),
+        };
+        if self.free.pop().is_some() {
+            self.slots[index as usize].body = Some(body);
+        } else {
+            self.slots.push(Slot {
+                generation,
+                body: Some(body),
             });
         }
-        self.bodies
-            .get_mut(id.0 as usize)
-            .ok_or(WorldError::UnknownBody { id: id.0, count })
+        self.live += 1;
+        self.broad.insert(index);
+        Ok(id)
+    }
+
+    /// Removes a body and returns its tree. Its handle (and every copy of it) is refused from
+    /// now on; its pairs and exclusions are forgotten.
+    pub fn remove_body(&mut self, id: BodyId) -> Result<Arc<ObbTree>, WorldError> {
+        self.get(id)?;
+        let slot = &mut self.slots[id.index() as usize];
+        let body = slot.body.take().expect("checked above");
+        // A slot whose generation would wrap is retired rather than reused.
+        if slot.generation < u32::MAX {
+            slot.generation += 1;
+            self.free.push(id.index());
+        }
+        self.live -= 1;
+        for other in &body.excluded {
+            if let Ok(o) = self.get_mut(*other) {
+                o.excluded.retain(|x| *x != id);
+            }
+        }
+        for &(other, t) in &body.thresholds {
+            if let Ok(o) = self.get_mut(other) {
+                o.thresholds.retain(|x| x.0 != id);
+            }
+            self.forget_threshold(t);
+        }
+        self.broad.remove(id.index());
+        Ok(body.tree)
     }
 
     /// Moves a body (coherent motion: the broad phase re-sorts incrementally).
     pub fn set_pose(&mut self, id: BodyId, pose: Pose) -> Result<(), WorldError> {
-        let body = self.body_mut(id, &pose)?;
+        self.get(id)?;
+        if !pose.is_valid() {
+            return Err(WorldError::InvalidPose { id, pose });
+        }
+        self.move_body(id, pose);
+        Ok(())
+    }
+
+    fn move_body(&mut self, id: BodyId, pose: Pose) {
+        let body = self.slots[id.index() as usize]
+            .body
+            .as_mut()
+            .expect("checked by the caller");
         if body.pose != pose {
             body.pose = pose;
             body.version += 1;
             body.aabb = world_box(&body.tree, &pose);
         }
+    }
+
+    /// Moves many bodies at once. Every handle and pose is checked first: on an error nothing
+    /// has moved.
+    pub fn set_poses(&mut self, updates: &[(BodyId, Pose)]) -> Result<(), WorldError> {
+        for &(id, pose) in updates {
+            self.get(id)?;
+            if !pose.is_valid() {
+                return Err(WorldError::InvalidPose { id, pose });
+            }
+        }
+        for &(id, pose) in updates {
+            self.move_body(id, pose);
+        }
         Ok(())
     }
 
-    /// Moves a body far (incoherent motion): the broad phase re-sorts from scratch and the
-    /// body's coherence caches are dropped.
+    /// Moves a body far (incoherent motion) in O(1): it is merged back into the broad phase's
+    /// order at the next step, and the coherence caches of its pairs are dropped when next used.
     pub fn teleport(&mut self, id: BodyId, pose: Pose) -> Result<(), WorldError> {
         self.set_pose(id, pose)?;
-        self.resort = true;
-        self.pairs.retain(|k, _| k.0 != id.0 && k.1 != id.0);
+        let body = self.get_mut(id)?;
+        body.epoch = body.epoch.wrapping_add(1);
+        self.broad.reinsert(id.index());
         Ok(())
     }
 
     /// The pose of a body.
     pub fn pose(&self, id: BodyId) -> Option<Pose> {
-        self.bodies.get(id.0 as usize).map(|b| b.pose)
+        self.get(id).ok().map(|b| b.pose)
+    }
+
+    /// The tree of a body.
+    pub fn tree(&self, id: BodyId) -> Option<&Arc<ObbTree>> {
+        self.get(id).ok().map(|b| &b.tree)
     }
 
     /// Never test this pair (parts joined by design).
     pub fn exclude_pair(&mut self, a: BodyId, b: BodyId) -> Result<(), WorldError> {
-        let count = self.bodies.len();
-        for id in [a, b] {
-            if id.0 as usize >= count {
-                return Err(WorldError::UnknownBody { id: id.0, count });
-            }
+        self.get(a)?;
+        self.get(b)?;
+        if a == b {
+            return Err(WorldError::SelfPair { id: a });
         }
-        self.excluded.insert((a.0.min(b.0), a.0.max(b.0)));
+        if self.is_excluded(a, b) {
+            return Ok(());
+        }
+        self.get_mut(a)?.excluded.push(b);
+        self.get_mut(b)?.excluded.push(a);
         Ok(())
     }
 
-    /// Sorts `order` by `min.x`: insertion sort under coherence, full sort otherwise.
-    fn sort(&mut self) {
-        let bodies = &self.bodies;
-        let key = |i: u32| bodies[i as usize].aabb.min.x;
-        if !self.resort {
-            let limit = self.options.resort_factor as usize * self.order.len().max(1);
-            let mut swaps = 0usize;
-            let o = &mut self.order;
-            let mut ok = true;
-            'outer: for i in 1..o.len() {
-                let mut j = i;
-                while j > 0 && key(o[j - 1]).total_cmp(&key(o[j])).is_gt() {
-                    o.swap(j - 1, j);
-                    j -= 1;
-                    swaps += 1;
-                    if swaps > limit {
-                        ok = false;
-                        break 'outer;
-                    }
-                }
-            }
-            if ok {
-                return;
-            }
+    /// Clearance threshold of every tested pair without its own (`None`: no clearance, the
+    /// default). Pairs within it are reported in [`StepReport::clearances`] each step.
+    pub fn set_clearance(&mut self, threshold: Option<f64>) -> Result<(), WorldError> {
+        if let Some(value) = threshold.filter(|t| t.is_nan() || *t < 0.0) {
+            return Err(WorldError::InvalidClearance { value });
         }
-        self.order
-            .sort_by(|&x, &y| key(x).total_cmp(&key(y)).then(x.cmp(&y)));
-        self.resort = false;
+        self.clearance = threshold.map(|t| t + 0.0);
+        Ok(())
     }
 
-    /// Body pairs whose world boxes overlap, minus static-static and excluded pairs, sorted.
-    fn candidates(&self) -> Vec<(u32, u32)> {
-        let mut out = Vec::new();
-        for (p, &i) in self.order.iter().enumerate() {
-            let bi = &self.bodies[i as usize];
-            for &j in &self.order[p + 1..] {
-                let bj = &self.bodies[j as usize];
-                if bj.aabb.min.x > bi.aabb.max.x {
-                    break;
-                }
-                if !bi.aabb.intersects(&bj.aabb) || (bi.is_static && bj.is_static) {
-                    continue;
-                }
-                let key = (i.min(j), i.max(j));
-                if !self.excluded.contains(&key) {
-                    out.push(key);
-                }
+    /// The world's clearance threshold.
+    pub fn clearance(&self) -> Option<f64> {
+        self.clearance
+    }
+
+    /// Clearance threshold of one pair, overriding the world's (`None`: back to the world's).
+    pub fn set_pair_clearance(
+        &mut self,
+        a: BodyId,
+        b: BodyId,
+        threshold: Option<f64>,
+    ) -> Result<(), WorldError> {
+        self.get(a)?;
+        self.get(b)?;
+        if a == b {
+            return Err(WorldError::SelfPair { id: a });
+        }
+        if let Some(value) = threshold.filter(|t| t.is_nan() || *t < 0.0) {
+            return Err(WorldError::InvalidClearance { value });
+        }
+        if let Some(&(_, old)) = self.get(a)?.thresholds.iter().find(|x| x.0 == b) {
+            self.forget_threshold(old);
+            self.get_mut(a)?.thresholds.retain(|x| x.0 != b);
+            self.get_mut(b)?.thresholds.retain(|x| x.0 != a);
+        }
+        if let Some(t) = threshold.map(|t| t + 0.0) {
+            *self.thresholds.entry(t.to_bits()).or_insert(0) += 1;
+            self.get_mut(a)?.thresholds.push((b, t));
+            self.get_mut(b)?.thresholds.push((a, t));
+        }
+        Ok(())
+    }
+
+    fn forget_threshold(&mut self, t: f64) {
+        let k = t.to_bits();
+        if let Some(c) = self.thresholds.get_mut(&k) {
+            *c -= 1;
+            if *c == 0 {
+                self.thresholds.remove(&k);
             }
         }
-        out.sort_unstable();
-        out
+    }
+
+    /// The clearance threshold of a pair: its own, else the world's.
+    pub fn pair_clearance_threshold(&self, a: BodyId, b: BodyId) -> Option<f64> {
+        let (ba, bb) = (self.get(a).ok()?, self.get(b).ok()?);
+        let (list, other) = if ba.thresholds.len() <= bb.thresholds.len() {
+            (&ba.thresholds, b)
+        } else {
+            (&bb.thresholds, a)
+        };
+        list.iter()
+            .find(|x| x.0 == other)
+            .map(|x| x.1)
+            .or(self.clearance)
+    }
+
+    /// The largest clearance threshold of any pair (the broad phase's margin).
+    pub fn max_clearance(&self) -> Option<f64> {
+        let own = self
+            .thresholds
+            .keys()
+            .next_back()
+            .map(|&k| f64::from_bits(k));
+        match (own, self.clearance) {
+            (Some(x), Some(y)) => Some(x.max(y)),
+            (x, y) => x.or(y),
+        }
+    }
+
+    fn is_excluded(&self, a: BodyId, b: BodyId) -> bool {
+        let (Ok(ba), Ok(bb)) = (self.get(a), self.get(b)) else {
+            return false;
+        };
+        // Search the shorter list.
+        if ba.excluded.len() <= bb.excluded.len() {
+            ba.excluded.contains(&b)
+        } else {
+            bb.excluded.contains(&a)
+        }
+    }
+
+    /// True when the pair is ever tested: two live bodies, not both static, not excluded.
+    pub fn is_pair_tested(&self, a: BodyId, b: BodyId) -> bool {
+        match (self.get(a), self.get(b)) {
+            (Ok(ba), Ok(bb)) => {
+                a != b && !(ba.is_static && bb.is_static) && !self.is_excluded(a, b)
+            }
+            _ => false,
+        }
+    }
+
+    /// Runs the broad phase alone (for schedulers that run their own narrow phase, like
+    /// `frcd-hybrid`): the tested body pairs whose world boxes, each grown by `margin / 2`,
+    /// overlap — every pair closer than `margin` among them. Sorted by slot index, `a < b`.
+    pub fn overlapping_pairs(&mut self, margin: f64) -> Vec<(BodyId, BodyId)> {
+        self.broad
+            .sort(&self.slots, self.options.resort_factor as usize);
+        let mut raw = Vec::new();
+        self.broad
+            .sweep(&self.slots, margin.max(0.0) * 0.5, &mut raw);
+        raw.sort_unstable();
+        raw.into_iter()
+            .map(|(i, j)| (self.handle(i), self.handle(j)))
+            .filter(|&(a, b)| self.pair_filter(a, b))
+            .collect()
+    }
+
+    fn pair_filter(&self, a: BodyId, b: BodyId) -> bool {
+        let (ba, bb) = (self.slot_body(a.index()), self.slot_body(b.index()));
+        !(ba.is_static && bb.is_static)
+            && (ba.excluded.is_empty() && bb.excluded.is_empty() || !self.is_excluded(a, b))
     }
 
     /// Advances one step: broad phase, then the narrow phase on the candidate pairs whose poses
-    /// changed since their last answer.
-    pub fn step(&mut self) -> StepReport {
-        self.sort();
-        let cands = self.candidates();
-        let mut report = StepReport {
-            candidates: cands.len(),
-            ..StepReport::default()
-        };
-        let mut old = std::mem::take(&mut self.pairs);
-        let mut work: Vec<((u32, u32), PairState)> = cands
-            .iter()
-            .map(|&k| {
-                let st = old.remove(&k).unwrap_or(PairState {
-                    versions: (u64::MAX, u64::MAX),
-                    result: None,
-                    cache: PairCache::new(),
-                });
-                (k, st)
-            })
-            .collect();
+    /// changed since their last answer. The report borrows the world.
+    pub fn step(&mut self) -> StepReport<'_> {
+        let margin = self.max_clearance().unwrap_or(0.0);
+        let cands = self.overlapping_pairs(margin);
+        // Merge last step's states (sorted like `cands`) into this step's work list.
+        let old = std::mem::take(&mut self.pairs);
+        let mut old = old.into_iter().peekable();
+        let mut work: Vec<PairEntry> = Vec::with_capacity(cands.len());
+        for (a, b) in cands {
+            let (ba, bb) = (self.slot_body(a.index()), self.slot_body(b.index()));
+            let overlap = ba.aabb.intersects(&bb.aabb);
+            let threshold = if margin > 0.0 || self.clearance.is_some() {
+                self.pair_clearance_threshold(a, b)
+            } else {
+                None
+            };
+            // Boxes farther apart than the pair's threshold: nothing to ask.
+            if !overlap && threshold.is_none_or(|t| box_gap(&ba.aabb, &bb.aabb) > t) {
+                continue;
+            }
+            let key = (a.index(), b.index());
+            let mut state = None;
+            while let Some(e) = old.peek() {
+                let k = (e.a.index(), e.b.index());
+                if k < key {
+                    old.next();
+                } else {
+                    if k == key && e.a == a && e.b == b {
+                        state = old.next().map(|e| e.state);
+                    }
+                    break;
+                }
+            }
+            work.push(PairEntry {
+                a,
+                b,
+                overlap,
+                threshold,
+                state: state.unwrap_or_else(PairState::new),
+            });
+        }
         drop(old);
-        let bodies = &self.bodies;
+        let slots = &self.slots;
         let options = self.options;
-        let run = |(k, st): &mut ((u32, u32), PairState)| -> bool {
-            let (a, b) = (&bodies[k.0 as usize], &bodies[k.1 as usize]);
-            let versions = (a.version, b.version);
-            if st.result.is_some() && st.versions == versions {
+        let run = |e: &mut PairEntry| -> bool {
+            let ba = slots[e.a.index() as usize].body.as_ref().expect("live");
+            let bb = slots[e.b.index() as usize].body.as_ref().expect("live");
+            let st = &mut e.state;
+            let versions = (ba.version, bb.version);
+            let epochs = (ba.epoch, bb.epoch);
+            if st.answered && st.versions == versions && st.threshold == e.threshold {
                 return true;
             }
-            if !options.coherence {
+            if !options.coherence || st.epochs != epochs {
                 st.cache.clear();
             }
-            let c = collide_cached(
-                &a.tree,
-                &a.pose,
-                &b.tree,
-                &b.pose,
-                &options.request,
-                &mut st.cache,
-            );
+            st.result = e.overlap.then(|| {
+                collide_cached(
+                    &ba.tree,
+                    &ba.pose,
+                    &bb.tree,
+                    &bb.pose,
+                    &options.request,
+                    &mut st.cache,
+                )
+            });
+            st.clearance = e.threshold.and_then(|t| {
+                let (witness, interfering) = st
+                    .result
+                    .as_ref()
+                    .map_or((None, false), |c| (c.witness, c.collide));
+                pair_clearance(
+                    &ba.tree,
+                    &ba.pose,
+                    &bb.tree,
+                    &bb.pose,
+                    t,
+                    witness,
+                    interfering,
+                )
+            });
             st.versions = versions;
-            st.result = Some(c);
+            st.epochs = epochs;
+            st.threshold = e.threshold;
+            st.answered = true;
             false
         };
         #[cfg(feature = "parallel")]
         let reused: Vec<bool> = {
             use rayon::prelude::*;
-            work.par_iter_mut().map(run).collect()
+            match &self.pool {
+                Some(pool) => pool.install(|| work.par_iter_mut().map(run).collect()),
+                None => work.par_iter_mut().map(run).collect(),
+            }
         };
         #[cfg(not(feature = "parallel"))]
         let reused: Vec<bool> = work.iter_mut().map(run).collect();
-        for ((k, st), reused) in work.into_iter().zip(reused) {
-            let c = st.result.as_ref().expect("answered above");
+        let mut stats = StepStats {
+            candidates: work.len(),
+            ..StepStats::default()
+        };
+        self.contacts.clear();
+        self.clearances.clear();
+        for (i, (e, reused)) in work.iter().zip(reused).enumerate() {
             if reused {
-                report.reused += 1;
-            } else {
-                report.counters += c.counters;
+                stats.reused += 1;
             }
-            if c.collide {
-                report.contacts.push(BodyContact {
-                    a: BodyId(k.0),
-                    b: BodyId(k.1),
-                    pairs: c.pairs.clone(),
+            if let Some(c) = &e.state.result {
+                if !reused {
+                    stats.counters += c.counters;
+                }
+                if c.collide {
+                    self.contacts.push(i as u32);
+                }
+            }
+            if let Some(c) = e.state.clearance {
+                self.clearances.push(c.with_ids(e.a, e.b));
+            }
+        }
+        self.pairs = work;
+        self.stats = stats;
+        self.last_step()
+    }
+
+    /// The report of the last [`World::step`] again (empty before the first).
+    pub fn last_step(&self) -> StepReport<'_> {
+        let contacts = self
+            .contacts
+            .iter()
+            .map(|&i| {
+                let e = &self.pairs[i as usize];
+                let c = e
+                    .state
+                    .result
+                    .as_ref()
+                    .expect("interfering pairs ran the query");
+                BodyContact {
+                    a: e.a,
+                    b: e.b,
+                    pairs: &c.pairs,
                     witness: c.witness,
                     contained: c.contained,
-                });
-            }
-            self.pairs.insert(k, st);
+                }
+            })
+            .collect();
+        StepReport {
+            contacts,
+            clearances: &self.clearances,
+            candidates: self.stats.candidates,
+            reused: self.stats.reused,
+            counters: self.stats.counters,
         }
-        report
     }
 
     /// World box of a body (conservative).
     pub fn body_aabb(&self, id: BodyId) -> Option<Aabb> {
-        self.bodies.get(id.0 as usize).map(|b| b.aabb)
+        self.get(id).ok().map(|b| b.aabb)
     }
 
     /// Centre of a body's world box (convenience for scene generators).
     pub fn body_center(&self, id: BodyId) -> Option<DVec3> {
         self.body_aabb(id).map(|b| b.center())
     }
+}
+
+/// Euclidean distance between two boxes (0 when they overlap): a lower bound of the distance of
+/// anything inside them.
+fn box_gap(a: &Aabb, b: &Aabb) -> f64 {
+    let d = (a.min - b.max).max(b.min - a.max).max(DVec3::ZERO);
+    d.length()
 }

@@ -1,0 +1,190 @@
+//! Stage 3: exact triangle tests on the CPU (and completion of GPU answers), and the clearance
+//! of pairs within their threshold.
+
+use crate::report::Via;
+use crate::state::{Outcome, PairState};
+use crate::{Checker, Contact};
+use frcd_geom::{Pose, Triangle};
+use frcd_obb::{ObbTree, PairCache, RelativeFrame, Request, collide, collide_cached};
+use std::time::Instant;
+
+impl Checker {
+    fn request(&self, mode: frcd_obb::Mode) -> Request {
+        Request {
+            mode,
+            segments: self.options.segments,
+            solid: self.options.solid,
+            ..Request::default()
+        }
+    }
+
+    /// Completes one job (CPU work; GPU results were stored in the plan).
+    pub(crate) fn finish_job(&self, job: &mut Job, poses: &[Pose]) {
+        let t = Instant::now();
+        self.finish_job_inner(job, poses);
+        job.time_us = t.elapsed().as_secs_f64() * 1e6;
+    }
+
+    fn finish_job_inner(&self, job: &mut Job, poses: &[Pose]) {
+        let (ia, ib) = (job.key.0 as usize, job.key.1 as usize);
+        let (pa, pb) = (&poses[ia], &poses[ib]);
+        let (ta, tb) = (
+            &self.trees[self.bodies[ia].mesh],
+            &self.trees[self.bodies[ib].mesh],
+        );
+        let plan = std::mem::replace(&mut job.plan, Plan::Cpu);
+        let outcome = match plan {
+            Plan::Reuse => {
+                job.plan = Plan::Reuse;
+                return;
+            }
+            Plan::Dropped => Outcome {
+                pairs: Vec::new(),
+                contained: None,
+                segments: Vec::new(),
+                via: Via::Acs,
+                clearance: None,
+            },
+            Plan::ClearanceOnly => Outcome {
+                pairs: Vec::new(),
+                contained: None,
+                segments: Vec::new(),
+                via: Via::Cpu,
+                clearance: None,
+            },
+            Plan::Cpu => self.cpu_query(ta, pa, tb, pb, &mut job.state.cache),
+            Plan::GpuDone(pairs) => {
+                let contained = if pairs.is_empty() && self.options.solid {
+                    collide(ta, pa, tb, pb, &self.request(frcd_obb::Mode::FirstContact)).contained
+                } else {
+                    None
+                };
+                let segments = self.segments_of(&pairs, ta, pa, tb, pb);
+                Outcome {
+                    pairs,
+                    contained,
+                    segments,
+                    via: Via::Gpu,
+                    clearance: None,
+                }
+            }
+            Plan::Acs(sa, sb) => {
+                let tri_a: Vec<Triangle> = sa.iter().map(|&i| ta.triangles()[i as usize]).collect();
+                let tri_b: Vec<Triangle> = sb.iter().map(|&i| tb.triangles()[i as usize]).collect();
+                let mut pairs: Vec<(u32, u32)> =
+                    frcd_obb::oracle::pairs_of_triangles(&tri_a, pa, &tri_b, pb)
+                        .into_iter()
+                        .map(|(x, y)| (sa[x as usize], sb[y as usize]))
+                        .collect();
+                pairs.sort_unstable();
+                if pairs.is_empty() {
+                    // Image space saw interference but the ACS holds no touching pair:
+                    // containment or a contact outside the dilated pixels; ask the exact query.
+                    let mut o = self.cpu_query(ta, pa, tb, pb, &mut job.state.cache);
+                    o.via = Via::Acs;
+                    o
+                } else {
+                    let segments = self.segments_of(&pairs, ta, pa, tb, pb);
+                    Outcome {
+                        pairs,
+                        contained: None,
+                        segments,
+                        via: Via::Acs,
+                        clearance: None,
+                    }
+                }
+            }
+        };
+        let mut outcome = outcome;
+        if let Some(t) = job.threshold {
+            outcome.clearance = frcd_obb::pair_clearance(
+                ta,
+                pa,
+                tb,
+                pb,
+                t,
+                outcome.pairs.first().copied(),
+                outcome.collide(),
+            );
+        }
+        job.plan = Plan::Cpu;
+        job.state.poses = (*pa, *pb);
+        job.state.result = Some(outcome);
+    }
+
+    fn cpu_query(
+        &self,
+        ta: &ObbTree,
+        pa: &Pose,
+        tb: &ObbTree,
+        pb: &Pose,
+        cache: &mut PairCache,
+    ) -> Outcome {
+        let c = collide_cached(
+            ta,
+            pa,
+            tb,
+            pb,
+            &self.request(frcd_obb::Mode::AllPairs),
+            cache,
+        );
+        Outcome {
+            pairs: c.pairs,
+            contained: c.contained,
+            segments: c.segments,
+            via: Via::Cpu,
+            clearance: None,
+        }
+    }
+
+    fn segments_of(
+        &self,
+        pairs: &[(u32, u32)],
+        ta: &ObbTree,
+        pa: &Pose,
+        tb: &ObbTree,
+        pb: &Pose,
+    ) -> Vec<Option<Contact>> {
+        if !self.options.segments {
+            return Vec::new();
+        }
+        let frame = RelativeFrame::new(pa, pb);
+        pairs
+            .iter()
+            .map(|&(x, y)| {
+                frcd_tritri::intersection_segment(
+                    &ta.triangles()[x as usize],
+                    &frame.triangle(&tb.triangles()[y as usize]),
+                )
+            })
+            .collect()
+    }
+}
+
+#[derive(Debug, PartialEq)]
+#[cfg_attr(not(all(feature = "gpgpu", feature = "image")), allow(dead_code))]
+pub(crate) enum Plan {
+    /// Same poses as last frame: keep the answer.
+    Reuse,
+    /// CPU OBB-tree query.
+    Cpu,
+    /// GPU pairs found; containment and segments still to do.
+    GpuDone(Vec<(u32, u32)>),
+    /// Exact tests on the accurate colliding set.
+    Acs(Vec<u32>, Vec<u32>),
+    /// Image space found no interference (fast mode).
+    Dropped,
+    /// The boxes do not overlap: no interference, only the clearance to find.
+    ClearanceOnly,
+}
+
+pub(crate) struct Job {
+    pub(crate) key: (u32, u32),
+    /// The raw boxes overlap (the collision query runs).
+    pub(crate) overlap: bool,
+    /// The pair's clearance threshold.
+    pub(crate) threshold: Option<f64>,
+    pub(crate) state: PairState,
+    pub(crate) plan: Plan,
+    pub(crate) time_us: f64,
+}

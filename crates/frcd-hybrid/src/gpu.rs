@@ -1,0 +1,250 @@
+//! GPU devices and uploads: created when the cost model wants them; software adapters (wgpu
+//! `DeviceType::Cpu`, e.g. lavapipe) are costed as software and not used by the hybrid backend
+//! unless the cost model was calibrated on that adapter. GPU failures during a frame fall back
+//! to the CPU ([`crate::GpuPolicy::Require`] makes them errors).
+
+#[cfg(feature = "gpgpu")]
+use crate::exact::{Job, Plan};
+use crate::{Backend, Checker, FrameResult, GpuFailure, GpuPolicy, HybridError, Mode};
+#[cfg(feature = "gpgpu")]
+use crate::{FrameState, report::Via};
+#[allow(unused_imports)]
+use frcd_geom::Pose;
+
+#[cfg(feature = "gpgpu")]
+#[derive(Debug)]
+pub(crate) struct Gpgpu {
+    pub(crate) ctx: frcd_gpgpu::GpuContext,
+    pub(crate) meshes: Vec<frcd_gpgpu::GpuMesh>,
+}
+
+#[cfg(feature = "image")]
+#[derive(Debug)]
+pub(crate) struct Image {
+    pub(crate) det: frcd_image::ImageDetector,
+    /// Per mesh: `None` for a mesh that is not a closed oriented manifold.
+    pub(crate) meshes: Vec<Option<frcd_image::GpuMesh>>,
+}
+
+impl Checker {
+    /// A GPU stage failed during a frame: an error under [`GpuPolicy::Require`], otherwise a
+    /// note in the frame's report (the caller then runs the stage on the CPU).
+    #[cfg_attr(not(any(feature = "gpgpu", feature = "image")), allow(dead_code))]
+    pub(crate) fn gpu_failed(
+        &self,
+        stage: &'static str,
+        source: GpuFailure,
+        result: &mut FrameResult,
+    ) -> Result<(), HybridError> {
+        if self.options.gpu == GpuPolicy::Require {
+            return Err(HybridError::Gpu { stage, source });
+        }
+        log::warn!("GPU {stage} failed, CPU used: {source}");
+        result
+            .notes
+            .push(format!("GPU {stage} failed, CPU used instead: {source}"));
+        Ok(())
+    }
+
+    /// True when a software adapter should not be used: the hybrid backend, a GPU not
+    /// required ([`GpuPolicy::Auto`]), and a cost model not calibrated on this adapter.
+    #[allow(dead_code)]
+    fn skip_software(&self, software: bool, adapter: &str) -> bool {
+        software
+            && self.options.backend == Backend::Hybrid
+            && self.options.gpu == GpuPolicy::Auto
+            && self.options.cost.adapter != adapter
+    }
+
+    pub(crate) fn init_gpu(&mut self) -> Result<(), HybridError> {
+        let o = self.options.clone();
+        if o.gpu == GpuPolicy::Off {
+            if matches!(o.backend, Backend::Gpgpu | Backend::Image) {
+                return Err(HybridError::Gpu {
+                    stage: "init",
+                    source: GpuFailure::Unavailable(format!(
+                        "backend '{}' needs a GPU but GPU use is off",
+                        o.backend.name()
+                    )),
+                });
+            }
+            return Ok(());
+        }
+        let n = self.bodies.len();
+        let want_gpgpu = match o.backend {
+            Backend::Gpgpu => true,
+            Backend::Hybrid => {
+                o.cost.gpu_broad_min_bodies().is_some_and(|m| n >= m)
+                    || (o.mode == Mode::Exact
+                        && o.cost
+                            .gpu_narrow_min_triangles()
+                            .is_some_and(|t| self.max_pair_triangles() >= t))
+            }
+            _ => false,
+        };
+        let want_image = o.mode == Mode::Fast
+            && match o.backend {
+                Backend::Image => true,
+                Backend::Hybrid => o.cost.image_us.is_some(),
+                _ => false,
+            }
+            && self.meshes.iter().any(|m| m.topology().is_closed());
+        let hard =
+            o.gpu == GpuPolicy::Require || matches!(o.backend, Backend::Gpgpu | Backend::Image);
+        let _ = hard; // used only with the GPU features
+        if want_gpgpu {
+            #[cfg(feature = "gpgpu")]
+            match self.make_gpgpu() {
+                Ok(g) => {
+                    let name = g.ctx.adapter_info().name.clone();
+                    if self.skip_software(g.ctx.is_software(), &name) {
+                        self.notes.push(format!(
+                            "gpgpu: '{name}' is a software adapter, costed as software: CPU used \
+                             (a cost model calibrated on this adapter changes that)"
+                        ));
+                    } else {
+                        self.gpgpu = Some(g);
+                    }
+                }
+                Err(source) if hard => {
+                    return Err(HybridError::Gpu {
+                        stage: "gpgpu",
+                        source,
+                    });
+                }
+                Err(e) => self.notes.push(format!("gpgpu unavailable, CPU used: {e}")),
+            }
+            #[cfg(not(feature = "gpgpu"))]
+            if o.gpu == GpuPolicy::Require {
+                return Err(HybridError::FeatureDisabled {
+                    backend: "hybrid",
+                    feature: "gpgpu",
+                });
+            }
+        }
+        if want_image {
+            #[cfg(feature = "image")]
+            match self.make_image() {
+                Ok(g) => {
+                    let ctx = g.det.context();
+                    let name = ctx.adapter_info().map_or(String::new(), |i| i.name.clone());
+                    if self.skip_software(ctx.is_software(), &name) {
+                        self.notes.push(format!(
+                            "image: '{name}' is a software adapter, costed as software: exact \
+                             CPU path used (a cost model calibrated on this adapter changes that)"
+                        ));
+                    } else {
+                        self.image = Some(g);
+                    }
+                }
+                Err(source) if hard => {
+                    return Err(HybridError::Gpu {
+                        stage: "image",
+                        source,
+                    });
+                }
+                Err(e) => self
+                    .notes
+                    .push(format!("image space unavailable, exact CPU path used: {e}")),
+            }
+            #[cfg(not(feature = "image"))]
+            if o.gpu == GpuPolicy::Require {
+                return Err(HybridError::FeatureDisabled {
+                    backend: "hybrid",
+                    feature: "image",
+                });
+            }
+        }
+        Ok(())
+    }
+
+    #[cfg(feature = "gpgpu")]
+    fn make_gpgpu(&self) -> Result<Gpgpu, GpuFailure> {
+        let ctx = frcd_gpgpu::GpuContext::headless()?;
+        let meshes = self
+            .trees
+            .iter()
+            .map(|t| ctx.upload(t))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Gpgpu { ctx, meshes })
+    }
+
+    #[cfg(feature = "image")]
+    fn make_image(&mut self) -> Result<Image, GpuFailure> {
+        let det = frcd_image::ImageDetector::headless()?;
+        let mut meshes = Vec::with_capacity(self.meshes.len());
+        for (i, m) in self.meshes.iter().enumerate() {
+            let name = self
+                .bodies
+                .iter()
+                .find(|b| b.mesh == i)
+                .map_or(String::new(), |b| b.name.clone());
+            match det.upload_shared(&name, m.clone()) {
+                Ok(g) => meshes.push(Some(g)),
+                Err(frcd_image::ImageError::NotSolid { name, .. }) => {
+                    self.notes.push(format!(
+                        "mesh of '{name}' is not a closed oriented manifold: its pairs take the exact path"
+                    ));
+                    meshes.push(None);
+                }
+                Err(e) => return Err(e.into()),
+            }
+        }
+        Ok(Image { det, meshes })
+    }
+
+    /// Exact mode: the GPU pair traversal for the pairs the cost model gives it. Returns how
+    /// many pairs it answered; on a GPU error the remaining pairs stay on the CPU.
+    #[cfg(feature = "gpgpu")]
+    pub(crate) fn gpu_pair_queries(
+        &self,
+        work: &mut [Job],
+        poses: &[Pose],
+        state: &mut FrameState,
+        result: &mut FrameResult,
+    ) -> Result<usize, HybridError> {
+        let o = &self.options;
+        let Some(g) = self.gpgpu.as_ref().filter(|_| o.mode == Mode::Exact) else {
+            return Ok(0);
+        };
+        let _ = Via::Gpu;
+        let mut gpu_pairs = 0;
+        for job in work.iter_mut().filter(|j| j.plan == Plan::Cpu) {
+            let (ia, ib) = (job.key.0 as usize, job.key.1 as usize);
+            let (ma, mb) = (self.bodies[ia].mesh, self.bodies[ib].mesh);
+            let tris = self.meshes[ma].triangle_count() + self.meshes[mb].triangle_count();
+            if o.backend != Backend::Gpgpu && !o.cost.prefer_gpu_narrow(tris) {
+                continue;
+            }
+            match g.ctx.collide(
+                &g.meshes[ma],
+                &poses[ia],
+                &g.meshes[mb],
+                &poses[ib],
+                &mut state.gpu_query,
+            ) {
+                Ok(hit) => {
+                    job.plan = Plan::GpuDone(hit.pairs);
+                    gpu_pairs += 1;
+                }
+                Err(e) => {
+                    self.gpu_failed("pair query", e.into(), result)?;
+                    break;
+                }
+            }
+        }
+        Ok(gpu_pairs)
+    }
+
+    /// Without the `gpgpu` feature no pair runs on the GPU.
+    #[cfg(not(feature = "gpgpu"))]
+    pub(crate) fn gpu_pair_queries(
+        &self,
+        _work: &mut [crate::exact::Job],
+        _poses: &[Pose],
+        _state: &mut crate::FrameState,
+        _result: &mut FrameResult,
+    ) -> Result<usize, HybridError> {
+        Ok(0)
+    }
+}

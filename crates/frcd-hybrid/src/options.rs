@@ -1,0 +1,132 @@
+//! Options, modes, backends and body descriptions.
+
+use crate::CostModel;
+use frcd_geom::TriMesh;
+use frcd_obb::BuildOptions;
+use std::sync::Arc;
+
+/// What the answer promises.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Equal to the exact oracle: never loses a pair (see the crate docs).
+    #[default]
+    Exact,
+    /// The thesis's RCS/ACS pipeline: one-sided error bounded by the image resolution.
+    Fast,
+}
+
+impl Mode {
+    /// `exact` or `fast`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Exact => "exact",
+            Mode::Fast => "fast",
+        }
+    }
+}
+
+/// Which backends the scheduler may use.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Backend {
+    /// Choose per stage and per pair with the cost model.
+    #[default]
+    Hybrid,
+    /// CPU only: sweep and prune, OBB trees, exact triangle tests.
+    Cpu,
+    /// GPU box pass and GPU exact pair queries for every pair (feature `gpgpu`).
+    Gpgpu,
+    /// Image-space ACS for every pair of closed meshes ([`Mode::Fast`] only; feature `image`).
+    Image,
+}
+
+impl Backend {
+    /// `hybrid`, `cpu`, `gpgpu` or `image`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::Hybrid => "hybrid",
+            Backend::Cpu => "cpu",
+            Backend::Gpgpu => "gpgpu",
+            Backend::Image => "image",
+        }
+    }
+}
+
+/// What to do when a GPU is wanted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum GpuPolicy {
+    /// Use one when the scene needs it and one is found; otherwise the CPU (noted in
+    /// [`crate::Checker::notes`]).
+    #[default]
+    Auto,
+    /// Never create a GPU device.
+    Off,
+    /// Fail with [`HybridError::Gpu`] when a wanted GPU device cannot be created.
+    Require,
+}
+
+/// Options of a [`Checker`]. Plain data with [`Default`] (exact, hybrid, solid, no segments).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Options {
+    /// Exact or fast.
+    pub mode: Mode,
+    /// Which backends may be used.
+    pub backend: Backend,
+    /// GPU device creation.
+    pub gpu: GpuPolicy,
+    /// Solid mode: closed bodies wholly inside one another interfere (default true).
+    pub solid: bool,
+    /// Also compute the contact (segment, point or polygon) of every touching triangle pair.
+    pub segments: bool,
+    /// Pixels across the longer lateral side of a pair's box overlap (image stage; default 256).
+    pub image_resolution: u32,
+    /// Measured costs and the thresholds derived from them.
+    pub cost: CostModel,
+    /// OBB tree build options (default: frcd-obb's fit rule, at most 4 triangles per leaf,
+    /// which measured 1.5-1.8x faster than 1 on the bogie demo, whose long thin tread
+    /// triangles pass a few millimetres from the brake blocks).
+    pub build: BuildOptions,
+    /// Clearance threshold of the scene (scene units; `None`: no clearance, the default). Every
+    /// tested body pair within it is reported in [`crate::FrameResult::clearances`] each frame,
+    /// interfering pairs with distance 0; the broad phase is grown by it, and pairs farther
+    /// apart cost no distance query.
+    pub clearance: Option<f64>,
+    /// Per body pair thresholds `((a, b), threshold)`, overriding `clearance` for that pair.
+    pub pair_clearances: Vec<((usize, usize), f64)>,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            mode: Mode::Exact,
+            backend: Backend::Hybrid,
+            gpu: GpuPolicy::Auto,
+            solid: true,
+            segments: false,
+            image_resolution: 256,
+            cost: CostModel::default(),
+            build: BuildOptions {
+                max_leaf_triangles: 4,
+                ..BuildOptions::default()
+            },
+            clearance: None,
+            pair_clearances: Vec::new(),
+        }
+    }
+}
+
+/// One body of the scene.
+#[derive(Clone, Debug)]
+pub struct BodySpec {
+    /// Name (for reports and errors).
+    pub name: String,
+    /// Mesh in the body's local frame; bodies sharing an `Arc` share one tree and one upload.
+    pub mesh: Arc<TriMesh>,
+    /// Static bodies are never tested against each other.
+    pub is_static: bool,
+}

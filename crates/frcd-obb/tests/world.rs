@@ -1,0 +1,315 @@
+//! The many-body World: handles, add/remove, batch updates, teleports, thread pools, against
+//! the brute-force oracle.
+
+use frcd_geom::{DQuat, DVec3, Pose, TriMesh, shapes};
+use frcd_obb::{BuildOptions, ObbTree, World, WorldError, WorldOptions, oracle};
+use rand::{Rng, SeedableRng, rngs::StdRng};
+use std::sync::Arc;
+
+fn random_pose(rng: &mut StdRng, spread: f64) -> Pose {
+    let axis = DVec3::new(
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+    )
+    .normalize_or(DVec3::X);
+    Pose::new(
+        DVec3::new(
+            rng.random_range(-spread..spread),
+            rng.random_range(-spread..spread),
+            rng.random_range(-spread..spread),
+        ),
+        DQuat::from_axis_angle(axis, rng.random_range(0.0..6.3)),
+    )
+}
+
+fn cube() -> Arc<ObbTree> {
+    Arc::new(ObbTree::build(
+        &shapes::cuboid(DVec3::ONE),
+        &BuildOptions::default(),
+    ))
+}
+
+#[test]
+fn handles_are_generational_and_per_world() {
+    let t = cube();
+    let mut w = World::new(WorldOptions::default());
+    let a = w.add_body(t.clone(), Pose::IDENTITY, false).unwrap();
+    let b = w.add_body(t.clone(), Pose::IDENTITY, false).unwrap();
+    assert_eq!(w.len(), 2);
+    w.remove_body(a).unwrap();
+    assert_eq!(w.len(), 1);
+    assert!(!w.contains(a));
+    assert_eq!(
+        w.set_pose(a, Pose::IDENTITY),
+        Err(WorldError::UnknownBody { id: a })
+    );
+    assert!(matches!(
+        w.remove_body(a),
+        Err(WorldError::UnknownBody { .. })
+    ));
+    // The slot is reused with a new generation: the old handle still does not reach it.
+    let c = w.add_body(t.clone(), Pose::IDENTITY, false).unwrap();
+    assert_eq!(c.index(), a.index());
+    assert_ne!(c, a);
+    assert_eq!(c.generation(), a.generation() + 1);
+    assert!(w.pose(a).is_none() && w.pose(c).is_some());
+    // A handle of another world.
+    let mut other = World::new(WorldOptions::default());
+    let o = other.add_body(t.clone(), Pose::IDENTITY, false).unwrap();
+    assert_eq!(o.index(), 0);
+    assert_eq!(
+        w.set_pose(o, Pose::IDENTITY),
+        Err(WorldError::ForeignBody { id: o })
+    );
+    assert_eq!(w.exclude_pair(b, b), Err(WorldError::SelfPair { id: b }));
+    let ids: Vec<_> = w.bodies().collect();
+    assert_eq!(ids, vec![c, b]);
+    // Contact found between c and b (both at the origin), excluded once asked.
+    assert_eq!(w.step().contacts.len(), 1);
+    w.exclude_pair(c, b).unwrap();
+    assert!(w.step().contacts.is_empty());
+    // Removing b forgets the exclusion: a new body in b's slot is tested against c.
+    w.remove_body(b).unwrap();
+    let d = w.add_body(t, Pose::IDENTITY, false).unwrap();
+    assert_eq!(d.index(), b.index());
+    let r = w.step();
+    assert_eq!((r.contacts[0].a, r.contacts[0].b), (c, d));
+}
+
+#[test]
+fn batch_updates_are_all_or_nothing() {
+    let t = cube();
+    let mut w = World::new(WorldOptions::default());
+    let a = w.add_body(t.clone(), Pose::IDENTITY, false).unwrap();
+    let b = w.add_body(t, Pose::IDENTITY, false).unwrap();
+    let far = Pose::from_translation(DVec3::new(10.0, 0.0, 0.0));
+    let bad = Pose {
+        translation: DVec3::new(f64::INFINITY, 0.0, 0.0),
+        rotation: DQuat::IDENTITY,
+    };
+    let e = w.set_poses(&[(a, far), (b, bad)]).unwrap_err();
+    assert!(
+        matches!(e, WorldError::InvalidPose { id, .. } if id == b),
+        "{e}"
+    );
+    assert_eq!(w.pose(a), Some(Pose::IDENTITY), "nothing moved");
+    w.set_poses(&[(a, far), (b, Pose::IDENTITY)]).unwrap();
+    assert_eq!(w.pose(a), Some(far));
+    assert!(w.step().contacts.is_empty());
+}
+
+/// Random adds, removes, moves, batch moves and teleports; every step equals the oracle over
+/// every live pair (not both static).
+#[test]
+fn random_edits_match_the_oracle() {
+    let meshes: Vec<TriMesh> = vec![
+        shapes::icosphere(1.0, 1),
+        shapes::cuboid(DVec3::new(2.0, 0.3, 0.3)),
+        shapes::cuboid(DVec3::new(0.5, 0.5, 0.5)),
+    ];
+    let trees: Vec<Arc<ObbTree>> = meshes
+        .iter()
+        .map(|m| Arc::new(ObbTree::build(m, &BuildOptions::default())))
+        .collect();
+    let mut rng = StdRng::seed_from_u64(17);
+    let mut w = World::new(WorldOptions::default());
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    w.set_thread_pool(Some(Arc::new(pool)));
+    // (handle, mesh, static)
+    let mut live: Vec<(frcd_obb::BodyId, usize, bool)> = Vec::new();
+    let mut removed = Vec::new();
+    let mut contacts_seen = 0;
+    for step in 0..40 {
+        for _ in 0..rng.random_range(0..6) {
+            match rng.random_range(0..10) {
+                0..=2 => {
+                    let m = rng.random_range(0..meshes.len());
+                    let s = rng.random_range(0..5) == 0;
+                    let id = w
+                        .add_body(trees[m].clone(), random_pose(&mut rng, 4.0), s)
+                        .unwrap();
+                    live.push((id, m, s));
+                }
+                3 if !live.is_empty() => {
+                    let k = rng.random_range(0..live.len());
+                    let (id, _, _) = live.swap_remove(k);
+                    w.remove_body(id).unwrap();
+                    removed.push(id);
+                }
+                4 if !live.is_empty() => {
+                    let k = rng.random_range(0..live.len());
+                    w.teleport(live[k].0, random_pose(&mut rng, 4.0)).unwrap();
+                }
+                5 if !live.is_empty() => {
+                    let batch: Vec<_> = live
+                        .iter()
+                        .filter(|_| rng.random_range(0..3) == 0)
+                        .map(|&(id, _, _)| {
+                            let p = w.pose(id).unwrap();
+                            (
+                                id,
+                                Pose::new(p.translation + DVec3::new(0.1, -0.05, 0.0), p.rotation),
+                            )
+                        })
+                        .collect();
+                    w.set_poses(&batch).unwrap();
+                }
+                _ if !live.is_empty() => {
+                    let k = rng.random_range(0..live.len());
+                    let id = live[k].0;
+                    let p = w.pose(id).unwrap();
+                    let q = Pose::new(
+                        p.translation + DVec3::new(0.2, 0.1, -0.1),
+                        p.rotation * DQuat::from_rotation_z(0.1),
+                    );
+                    w.set_pose(id, q).unwrap();
+                }
+                _ => {}
+            }
+        }
+        for id in &removed {
+            assert!(!w.contains(*id));
+        }
+        let mut expected = Vec::new();
+        let mut sorted = live.clone();
+        sorted.sort_by_key(|x| x.0);
+        for (i, &(ia, ma, sa)) in sorted.iter().enumerate() {
+            for &(ib, mb, sb) in &sorted[i + 1..] {
+                if sa && sb {
+                    continue;
+                }
+                let pairs = oracle::pairs(
+                    &meshes[ma],
+                    &w.pose(ia).unwrap(),
+                    &meshes[mb],
+                    &w.pose(ib).unwrap(),
+                );
+                if !pairs.is_empty() {
+                    expected.push((ia, ib, pairs));
+                }
+            }
+        }
+        let r = w.step();
+        let got: Vec<_> = r
+            .contacts
+            .iter()
+            .map(|c| (c.a, c.b, c.pairs.to_vec()))
+            .collect();
+        assert_eq!(got, expected, "step {step}");
+        contacts_seen += got.len();
+        assert_eq!(w.last_step().contacts.len(), expected.len());
+    }
+    assert!(contacts_seen > 10, "the scene interferes: {contacts_seen}");
+}
+
+#[test]
+fn overlapping_pairs_with_a_margin_keep_every_close_pair() {
+    let t = cube();
+    let mut w = World::new(WorldOptions::default());
+    let a = w.add_body(t.clone(), Pose::IDENTITY, false).unwrap();
+    // Cubes of side 2 centred 2.3 apart along a diagonal: gap 0.3 on x and y, distance 0.3·√2.
+    let b = w
+        .add_body(t, Pose::from_translation(DVec3::new(2.3, 2.3, 0.0)), false)
+        .unwrap();
+    assert!(w.overlapping_pairs(0.0).is_empty());
+    assert!(w.overlapping_pairs(0.29).is_empty());
+    assert_eq!(w.overlapping_pairs(0.31), vec![(a, b)]);
+}
+
+/// Clearance against the brute-force oracle: every pair within its threshold (world threshold,
+/// one pair with its own) is reported with the oracle's distance, interfering pairs with 0, and
+/// no other pair.
+#[test]
+fn clearance_matches_the_oracle() {
+    let meshes: Vec<TriMesh> = vec![
+        shapes::icosphere(1.0, 1),
+        shapes::cuboid(DVec3::new(1.5, 0.3, 0.3)),
+    ];
+    let trees: Vec<Arc<ObbTree>> = meshes
+        .iter()
+        .map(|m| Arc::new(ObbTree::build(m, &BuildOptions::default())))
+        .collect();
+    let mut rng = StdRng::seed_from_u64(5);
+    let mut w = World::new(WorldOptions::default());
+    assert!(matches!(
+        w.set_clearance(Some(-1.0)),
+        Err(WorldError::InvalidClearance { .. })
+    ));
+    let threshold = 0.4;
+    w.set_clearance(Some(threshold)).unwrap();
+    let mut ids = Vec::new();
+    for i in 0..14 {
+        let id = w
+            .add_body(trees[i % 2].clone(), random_pose(&mut rng, 3.5), i == 0)
+            .unwrap();
+        ids.push(id);
+    }
+    w.set_pair_clearance(ids[1], ids[2], Some(3.0)).unwrap();
+    w.set_pair_clearance(ids[3], ids[4], Some(0.0)).unwrap();
+    let (mut close, mut touching) = (0, 0);
+    for step in 0..4 {
+        for (k, &id) in ids.iter().enumerate().skip(1) {
+            let p = w.pose(id).unwrap();
+            let q = Pose::new(
+                p.translation + DVec3::new(0.1, -0.1, 0.05) * ((k + step) % 3) as f64,
+                p.rotation * DQuat::from_rotation_x(0.2),
+            );
+            w.set_pose(id, q).unwrap();
+        }
+        let got: Vec<_> = w.step().clearances.to_vec();
+        let mut expected = Vec::new();
+        for i in 0..ids.len() {
+            for j in i + 1..ids.len() {
+                let t = match (i, j) {
+                    (1, 2) => 3.0,
+                    (3, 4) => 0.0,
+                    _ => threshold,
+                };
+                let (pa, pb) = (w.pose(ids[i]).unwrap(), w.pose(ids[j]).unwrap());
+                let (ma, mb) = (&meshes[i % 2], &meshes[j % 2]);
+                let d = oracle::distance(ma, &pa, mb, &pb);
+                let hit = !oracle::pairs(ma, &pa, mb, &pb).is_empty();
+                if (d.distance - t).abs() < 1e-9 {
+                    // Too close to the threshold for a float oracle: the exact one decides.
+                    if !hit && !oracle::within_exact(ma, &pa, mb, &pb, t) {
+                        continue;
+                    }
+                } else if !hit && d.distance > t {
+                    continue;
+                }
+                expected.push((i, j, if hit { 0.0 } else { d.distance }, hit));
+            }
+        }
+        assert_eq!(
+            got.len(),
+            expected.len(),
+            "step {step}: {got:?} vs {expected:?}"
+        );
+        for (g, e) in got.iter().zip(&expected) {
+            assert_eq!((g.a, g.b), (ids[e.0], ids[e.1]));
+            assert_eq!(g.interfering, e.3);
+            assert!((g.distance - e.2).abs() < 1e-12, "{g:?} vs {e:?}");
+            // The points lie on the reported triangles, as far apart as reported.
+            let (pa, pb) = (w.pose(g.a).unwrap(), w.pose(g.b).unwrap());
+            let ta = meshes[e.0 % 2].triangle(g.triangles.0 as usize);
+            let tb = meshes[e.1 % 2].triangle(g.triangles.1 as usize);
+            let qa = pa.inverse().transform_point(g.points[0]);
+            let qb = pb.inverse().transform_point(g.points[1]);
+            let on = |t: &frcd_geom::Triangle, q: DVec3| {
+                let c = oracle::closest_point_on_triangle(q, t.v[0], t.v[1], t.v[2]);
+                (c - q).length() < 1e-9
+            };
+            assert!(on(&ta, qa) && on(&tb, qb), "{g:?}");
+            if !g.interfering {
+                assert!(((g.points[0] - g.points[1]).length() - g.distance).abs() < 1e-9);
+            }
+            close += 1;
+            touching += g.interfering as usize;
+        }
+    }
+    assert!(close > touching && touching > 0, "{close} {touching}");
+}
