@@ -222,7 +222,9 @@ fn quiet_xdg_runtime_dir() {
         if private {
             // SAFETY: called first thing in main, before any other thread exists.
             #[allow(unsafe_code)]
-            unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
+            unsafe {
+                std::env::set_var("XDG_RUNTIME_DIR", &dir)
+            };
         }
     }
 }

@@ -26,10 +26,7 @@ fn subnormal_meshes_equal_the_oracle() {
             };
             let a = scaled(&base, s, DVec3::ZERO);
             let b = scaled(&base, s, DVec3::new(1.5 * s, 0.25 * s, 0.0));
-            let (ta, tb) = (
-                ObbTree::build(&a, &options),
-                ObbTree::build(&b, &options),
-            );
+            let (ta, tb) = (ObbTree::build(&a, &options), ObbTree::build(&b, &options));
             for (m, tm, n, tn) in [(&a, &ta, &a, &ta), (&a, &ta, &b, &tb)] {
                 let got = collide(tm, &Pose::IDENTITY, tn, &Pose::IDENTITY, &request);
                 let want = oracle::pairs(m, &Pose::IDENTITY, n, &Pose::IDENTITY);
@@ -43,7 +40,12 @@ fn subnormal_meshes_equal_the_oracle() {
 /// `mesh_tree` target decodes its input: the tree's self-collision must equal the oracle's.
 #[test]
 fn fuzz_reproducer_subnormal_points() {
-    const DATA: &[u8] = &[254, 0, 1, 0, 16, 104, 0, 0, 0, 0, 4, 0, 0, 0, 3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 7, 0, 0, 0, 0, 0, 0, 0, 0, 0, 254, 0, 0, 0, 0, 0, 213, 254, 255, 9, 0, 0, 0, 0, 0, 0, 64, 0, 0, 249, 247, 0, 0, 0, 0, 0, 5, 126, 0, 0, 0, 64, 0, 0, 0, 64, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 204, 204, 204, 3, 0, 204, 4, 204, 204];
+    const DATA: &[u8] = &[
+        254, 0, 1, 0, 16, 104, 0, 0, 0, 0, 4, 0, 0, 0, 3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 7,
+        0, 0, 0, 0, 0, 0, 0, 0, 0, 254, 0, 0, 0, 0, 0, 213, 254, 255, 9, 0, 0, 0, 0, 0, 0, 64, 0,
+        0, 249, 247, 0, 0, 0, 0, 0, 5, 126, 0, 0, 0, 64, 0, 0, 0, 64, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+        204, 204, 204, 3, 0, 204, 4, 204, 204,
+    ];
     let (head, rest) = DATA.split_at(2);
     let nv = (head[0] % 12) as usize;
     let leaf = 1 + (head[1] % 4) as u32;
