@@ -11,7 +11,7 @@
 use frcd_geom::{Aabb, DVec3, Pose};
 use frcd_io::Clearances;
 use frcd_obb::ObbTree;
-use frcd_obb::distance::{DistanceRequest, distance, within};
+use frcd_obb::distance::{DistanceRequest, distance_below, error_bound, within};
 use std::collections::HashSet;
 
 /// Which body pairs have a clearance threshold, and what it is.
@@ -146,16 +146,21 @@ pub fn frame_clearances(
                 continue;
             }
             work.distance_queries += 1;
-            let d = distance(ta, pa, tb, pb, &DistanceRequest::default());
-            if d.distance.is_nan() {
-                continue; // non-finite poses: the scene loader refuses them
-            }
             // `d` is the length of a real point pair (up to the rounding in `error_bound`), so
             // `d + error_bound <= threshold` proves the pair within. It is also accurate to
             // `error_bound` for well-conditioned features and to ~sqrt(ε)·L in the worst case
             // (see `frcd_obb::distance`): `WORST` covers that with a wide margin. In the band
-            // between, `within` decides exactly.
+            // between, `within` decides exactly. The search is bounded by the top of that band:
+            // a pair farther apart never opens the node pairs a full distance query would.
             const WORST: f64 = (1u64 << 28) as f64;
+            let band = DistanceRequest::default();
+            let limit = threshold + WORST * error_bound(ta, pa, tb, pb);
+            let Some(d) = distance_below(ta, pa, tb, pb, &band, limit) else {
+                continue;
+            };
+            if d.distance.is_nan() {
+                continue; // non-finite poses: the scene loader refuses them
+            }
             let inside = is_contained
                 || d.distance + d.error_bound <= threshold
                 || (d.distance - d.error_bound * WORST <= threshold && {

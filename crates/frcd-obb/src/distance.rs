@@ -118,7 +118,8 @@ pub fn distance(
     pose_b: &Pose,
     r: &DistanceRequest,
 ) -> Distance {
-    run_distance(a, pose_a, b, pose_b, r, None)
+    run_distance(a, pose_a, b, pose_b, r, None, f64::INFINITY)
+        .expect("an unbounded search always finds a pair")
 }
 
 /// Caller-owned warm start for [`distance_cached`]: the triangle pair of the previous answer.
@@ -157,9 +158,47 @@ pub fn distance_cached(
     r: &DistanceRequest,
     cache: &mut DistanceCache,
 ) -> Distance {
-    let d = run_distance(a, pose_a, b, pose_b, r, cache.pair);
+    let d = run_distance(a, pose_a, b, pose_b, r, cache.pair, f64::INFINITY)
+        .expect("an unbounded search always finds a pair");
     cache.pair = d.distance.is_finite().then_some(d.triangles);
     d
+}
+
+/// [`distance`] when the surfaces may come within `limit` of each other; `None` when they are
+/// farther apart than that. The search starts with `limit` as its upper bound, so node pairs
+/// whose certified lower bound already exceeds it are never opened: a pair farther than `limit`
+/// costs about what a [`within`] query costs instead of a full distance search (clearance
+/// checks ask exactly this).
+///
+/// Guarantee: every triangle pair whose computed distance is below `limit` is considered, so
+/// `Some(d)` is what [`distance`] returns (same bound), and `None` means the computed distance
+/// of every triangle pair is at least `limit` (with `rel_err` / `abs_err`, at least `limit`
+/// less those tolerances). Give `limit` a margin above a decision threshold
+/// (e.g. `threshold + k * error_bound`) when the decision must account for rounding.
+///
+/// ```
+/// use frcd_obb::distance::{distance_below, DistanceRequest};
+/// use frcd_obb::{BuildOptions, ObbTree};
+/// use frcd_geom::{shapes, DVec3, Pose};
+/// let t = ObbTree::build(&shapes::icosphere(1.0, 2), &BuildOptions::default());
+/// let far = Pose::from_translation(DVec3::new(5.0, 0.0, 0.0));
+/// let r = DistanceRequest::default();
+/// assert!(distance_below(&t, &Pose::IDENTITY, &t, &far, &r, 1.0).is_none());
+/// let d = distance_below(&t, &Pose::IDENTITY, &t, &far, &r, 4.0).unwrap();
+/// assert!((d.distance - 3.0).abs() < 1e-2); // icosphere vertices lie on the unit sphere
+/// ```
+pub fn distance_below(
+    a: &ObbTree,
+    pose_a: &Pose,
+    b: &ObbTree,
+    pose_b: &Pose,
+    r: &DistanceRequest,
+    limit: f64,
+) -> Option<Distance> {
+    if limit.is_nan() {
+        return None;
+    }
+    run_distance(a, pose_a, b, pose_b, r, None, limit)
 }
 
 fn run_distance(
@@ -169,12 +208,15 @@ fn run_distance(
     pose_b: &Pose,
     r: &DistanceRequest,
     seed: Option<(u32, u32)>,
-) -> Distance {
+    limit: f64,
+) -> Option<Distance> {
     let mut q = Query::new(a, pose_a, b, pose_b);
     let rel = if r.rel_err > 0.0 { r.rel_err } else { 0.0 };
     let abs = if r.abs_err > 0.0 { r.abs_err } else { 0.0 };
+    // With a finite `limit` the search starts from it as its upper bound: no pair found below it
+    // leaves `pa` NaN, and the answer is `None`.
     let mut best = Best {
-        d: f64::INFINITY,
+        d: limit,
         pair: (0, 0),
         pa: DVec3::NAN,
         pb: DVec3::NAN,
@@ -183,23 +225,28 @@ fn run_distance(
         if (ta as usize) < a.triangles().len() && (tb as usize) < b.triangles().len() {
             q.counters.tri_tests += 1;
             let (d, pa, pb) = triangle_distance(&a.triangle(ta).v, &q.b_triangle(tb));
-            best = Best {
-                d,
-                pair: (ta, tb),
-                pa,
-                pb,
-            };
-            q.set_dir(pa, pb, d);
+            if d < best.d {
+                best = Best {
+                    d,
+                    pair: (ta, tb),
+                    pa,
+                    pb,
+                };
+                q.set_dir(pa, pb, d);
+            }
         }
     }
     if best.d > 0.0 {
         q.search(&mut best, rel, abs);
     }
+    if limit.is_finite() && best.pa.is_nan() {
+        return None;
+    }
     if !best.d.is_finite() {
         // Non-finite input: report NaN rather than an arbitrary pair.
         best.d = f64::NAN;
     }
-    Distance {
+    Some(Distance {
         distance: best.d,
         triangles: best.pair,
         points: [
@@ -208,7 +255,7 @@ fn run_distance(
         ],
         error_bound: q.error_bound(),
         counters: q.counters,
-    }
+    })
 }
 
 /// True when the two surfaces come within `tolerance` of each other (touching counts, so touching
@@ -310,6 +357,13 @@ const BOUND_REL: f64 = 64.0 * f64::EPSILON * 0.5;
 /// underflow, and the square root turns an absolute error `c · 2⁻¹⁰⁰⁰` into at most
 /// `sqrt(c) · 2⁻⁵⁰⁰`.
 const UNDERFLOW_ABS: f64 = f64::from_bits((1023 - 496) << 52);
+
+/// The `error_bound` that [`distance`] would report for this pair of trees and poses, without
+/// running the query (it depends only on the scene's magnitude): for choosing the `limit` of
+/// [`distance_below`] around a decision threshold.
+pub fn error_bound(a: &ObbTree, pose_a: &Pose, b: &ObbTree, pose_b: &Pose) -> f64 {
+    Query::new(a, pose_a, b, pose_b).error_bound()
+}
 
 fn obb_magnitude(o: &Obb) -> f64 {
     o.center.length() + o.half_extents.length()

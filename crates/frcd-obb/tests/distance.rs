@@ -2,7 +2,8 @@
 
 use frcd_geom::{DQuat, DVec3, Pose, TriMesh, shapes};
 use frcd_obb::distance::{
-    DistanceCache, DistanceRequest, distance, distance_cached, within, within_counted,
+    DistanceCache, DistanceRequest, distance, distance_below, distance_cached, within,
+    within_counted,
 };
 use frcd_obb::{BuildOptions, ObbTree, oracle};
 use rand::rngs::StdRng;
@@ -245,4 +246,46 @@ fn warm_start_gives_the_same_distance() {
     let warm = distance_cached(&other, &Pose::IDENTITY, &tb, &pb, &r, &mut cache);
     let cold = distance(&other, &Pose::IDENTITY, &tb, &pb, &r);
     assert!((cold.distance - warm.distance).abs() <= cold.error_bound);
+}
+
+#[test]
+fn distance_below_finds_every_pair_under_its_limit_and_none_above_it() {
+    let mut rng = StdRng::seed_from_u64(31);
+    let ms = meshes();
+    let trees: Vec<ObbTree> = ms.iter().map(|m| tree(m, 1)).collect();
+    let (mut some, mut none) = (0, 0);
+    for round in 0..80 {
+        let i = round % ms.len();
+        let j = (round / 3) % ms.len();
+        let pa = random_pose(&mut rng, 1.5);
+        let pb = random_pose(&mut rng, 1.5);
+        let r = DistanceRequest::default();
+        let o = oracle::distance(&ms[i], &pa, &ms[j], &pb);
+        for limit in [
+            0.0,
+            0.5 * o.distance,
+            o.distance + 1e-9,
+            2.0 * o.distance + 0.1,
+        ] {
+            match distance_below(&trees[i], &pa, &trees[j], &pb, &r, limit) {
+                Some(d) => {
+                    some += 1;
+                    // The same answer as the unbounded search, within the oracle's tolerance.
+                    assert!((d.distance - o.distance).abs() <= 1e-12, "round {round}");
+                    assert!(d.distance < limit || (limit == 0.0 && d.distance == 0.0));
+                }
+                None => {
+                    none += 1;
+                    // Never `None` while the oracle's distance is below the limit.
+                    assert!(
+                        o.distance >= limit - 1e-12,
+                        "round {round}: {} < {limit}",
+                        o.distance
+                    );
+                    assert!(distance_below(&trees[i], &pa, &trees[j], &pb, &r, f64::NAN).is_none());
+                }
+            }
+        }
+    }
+    assert!(some > 50 && none > 50, "{some} / {none}");
 }
