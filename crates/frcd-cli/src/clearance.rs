@@ -154,7 +154,13 @@ pub fn frame_clearances(
             // a pair farther apart never opens the node pairs a full distance query would.
             const WORST: f64 = (1u64 << 28) as f64;
             let band = DistanceRequest::default();
-            let limit = threshold + WORST * error_bound(ta, pa, tb, pb);
+            // A contained pair reports 0 with its closest surface points, however far apart
+            // those are: no limit then.
+            let limit = if is_contained {
+                f64::INFINITY
+            } else {
+                threshold + WORST * error_bound(ta, pa, tb, pb)
+            };
             let Some(d) = distance_below(ta, pa, tb, pb, &band, limit) else {
                 continue;
             };
