@@ -18,8 +18,8 @@
 //! Criterion times one query cycling through the 16 setups (`frcd/<pair>/<kind>`); before that
 //! the medians per query of frcd and parry3d-f64 are printed side by side (parry on the first 3
 //! setups only: it is two to three orders of magnitude slower), with their agreement. When
-//! `FRCD_DISTANCE_EXPORT=DIR` is set, every pair's meshes and poses are written there for the
-//! PQP driver (`benches/peers/pqp_distance.cpp`).
+//! `FRCD_DISTANCE_EXPORT=DIR` is set, every pair's meshes and poses are written there as plain
+//! text, so a peer library run outside this repository can time the same queries.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use frcd_geom::{DQuat, DVec3, Pose, TriMesh};
@@ -260,10 +260,8 @@ fn bench(c: &mut Criterion) {
     );
     let req = DistanceRequest::default();
     for p in &all {
-        if let Some(dir) = &export_dir {
-            if let Err(e) = export(p, dir) {
-                println!("export {}: {e}", p.name);
-            }
+        if let Some(Err(e)) = export_dir.as_ref().map(|dir| export(p, dir)) {
+            println!("export {}: {e}", p.name);
         }
         for (k, kind) in KINDS.iter().enumerate() {
             let poses = &p.poses[k];

@@ -156,7 +156,10 @@ fn subnormal_gap(rng: &mut StdRng) -> Pair {
     }
 }
 
-const FAMILIES: &[(&str, fn(&mut StdRng) -> Pair)] = &[
+/// A stress family: its name and its generator.
+type Family = (&'static str, fn(&mut StdRng) -> Pair);
+
+const FAMILIES: &[Family] = &[
     ("parallel_edges", parallel_edges),
     ("coplanar_offset", coplanar_offset),
     ("vertex_over_face_1e-12", vertex_over_face),

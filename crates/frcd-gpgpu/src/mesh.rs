@@ -73,7 +73,7 @@ fn view_of(t: &wgpu::Texture, label: &'static str) -> wgpu::TextureView {
 /// on a square layer (GL makes that a cube map).
 fn layers_for(layout: &TexLayout, layers: u32) -> u32 {
     let layers = layers.max(crate::pack::MIN_LAYERS);
-    if layout.width() == layout.rows_per_layer && layers % 6 == 0 {
+    if layout.width() == layout.rows_per_layer && layers.is_multiple_of(6) {
         layers + 1
     } else {
         layers

@@ -227,11 +227,14 @@ impl QueryScratch {
 }
 
 /// A batch checked and converted for the GPU; independent of the meshes' lifetimes.
+/// The triangles of A and B of one body pair (shared with the meshes).
+type TrianglePair = (Arc<[Triangle]>, Arc<[Triangle]>);
+
 struct Prepared {
     /// One `PairInfo` per pair.
     infos: Vec<PairInfo>,
     frames: Vec<RelativeFrame>,
-    tris: Vec<(Arc<[Triangle]>, Arc<[Triangle]>)>,
+    tris: Vec<TrianglePair>,
     levels: u32,
 }
 

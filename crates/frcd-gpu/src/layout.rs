@@ -113,9 +113,13 @@ pub struct ResolveParams {
     pub _pad2: f32,
 }
 
-/// Every mirror as `(WGSL name, size, [(member, offset, size)])`, for the reflection test.
+/// One mirror as `(WGSL name, size, [(member, offset, size)])`.
 #[doc(hidden)]
-pub fn mirrors() -> Vec<(&'static str, usize, Vec<(&'static str, usize, usize)>)> {
+pub type MirrorLayout = (&'static str, usize, Vec<(&'static str, usize, usize)>);
+
+/// Every mirror's layout, for the reflection test.
+#[doc(hidden)]
+pub fn mirrors() -> Vec<MirrorLayout> {
     use std::mem::{offset_of, size_of};
     macro_rules! m {
         ($t:ident { $($f:ident : $ft:ty),* }) => {
