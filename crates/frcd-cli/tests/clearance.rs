@@ -1,41 +1,10 @@
 //! `frcd check --clearance`: per-frame clearances in the JSON and CSV reports, the text
 //! summary, the SVG plot, and typed errors for bad thresholds (the built binary).
 
+mod common;
+use common::*;
 use frcd_geom::{DVec3, shapes};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn frcd(args: &[&str], dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_frcd"))
-        .args(args)
-        .current_dir(dir)
-        .env_remove("FRCD_COST_MODEL")
-        .output()
-        .expect("run frcd")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "status {:?}\nstdout:\n{}\nstderr:\n{}",
-        o.status,
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
-
-fn assert_clean_failure(o: &Output, needle: &str) {
-    let t = text(o);
-    assert!(!o.status.success(), "{t}");
-    assert!(!t.contains("panicked"), "{t}");
-    assert!(t.contains(needle), "expected '{needle}' in:\n{t}");
-}
-
-fn tempdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("frcd-clear-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
 
 /// Gaps between cube `a` (static, at the origin) and cube `b` per frame: 4 mm, touching,
 /// interfering, 3 mm, 1 m. A small ball sits inside `a` in frame 4 only (contained).

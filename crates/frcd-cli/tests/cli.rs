@@ -1,40 +1,9 @@
 //! The built `frcd` binary: reports, and clear errors (never a panic) on bad input.
 
+mod common;
+use common::*;
 use frcd_geom::{DVec3, shapes};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn frcd(args: &[&str], dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_frcd"))
-        .args(args)
-        .current_dir(dir)
-        .env_remove("FRCD_COST_MODEL")
-        .output()
-        .expect("run frcd")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "status {:?}\nstdout:\n{}\nstderr:\n{}",
-        o.status,
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
-
-fn assert_clean_failure(o: &Output, needle: &str) {
-    let t = text(o);
-    assert!(!o.status.success(), "{t}");
-    assert!(!t.contains("panicked"), "{t}");
-    assert!(t.contains(needle), "expected '{needle}' in:\n{t}");
-}
-
-fn tempdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("frcd-cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
 
 /// Two cubes; `b` moves through `a` along x: frames 0 and 4 apart, 1..=3 interfering
 /// (frame 2 deep), plus a small ball that sits inside `a` in frame 2 only.

@@ -3,65 +3,12 @@
 //! not wrap, names are escaped, `-q` is quiet, progress stays off redirected output, and the
 //! report says what it measured.
 
+mod common;
+use common::*;
 use frcd_geom::{DVec3, shapes};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
-use std::time::{Duration, Instant};
-
-fn frcd(args: &[&str], dir: &Path) -> Output {
-    run_with_timeout(args, dir, Duration::from_secs(120))
-}
-
-/// Runs frcd, killing it after `limit` (a hang is a failure, not a stuck test).
-fn run_with_timeout(args: &[&str], dir: &Path, limit: Duration) -> Output {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_frcd"))
-        .args(args)
-        .current_dir(dir)
-        .env_remove("FRCD_COST_MODEL")
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("run frcd");
-    let t0 = Instant::now();
-    loop {
-        if child.try_wait().unwrap().is_some() {
-            return child.wait_with_output().unwrap();
-        }
-        if t0.elapsed() > limit {
-            child.kill().ok();
-            let o = child.wait_with_output().unwrap();
-            panic!(
-                "frcd {args:?} hung for {limit:?}\nstderr: {}",
-                String::from_utf8_lossy(&o.stderr)
-            );
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "status {:?}\nstdout:\n{}\nstderr:\n{}",
-        o.status,
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
-
-fn assert_clean_failure(o: &Output, needle: &str) {
-    let t = text(o);
-    assert!(!o.status.success(), "{t}");
-    assert!(!t.contains("panicked"), "{t}");
-    assert!(t.contains(needle), "expected '{needle}' in:\n{t}");
-}
-
-fn tempdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("frcd-cli-hostile-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+use std::process::Command;
+use std::time::Duration;
 
 /// Cube `a` (static) and cube `b` moving along x through it, frames from a trajectory CSV
 /// (`frames` frames); ball `c` inside `a` in frame 2 only.
