@@ -330,15 +330,11 @@ fn stored_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/meshes")
 }
 
-/// The stored-mesh scenes: each mesh against a copy of itself sliding diagonally through it,
-/// turning. `None` when the folder is absent.
-fn stored_scenes(steps: usize) -> Result<Option<Vec<Scene>>> {
-    let dir = stored_dir();
-    if !dir.is_dir() {
-        return Ok(None);
-    }
+/// Every STL and OBJ mesh one folder below `dir` (the layout of `../shared/meshes`), sorted by
+/// path, with its file stem as name.
+pub(crate) fn stored_meshes(dir: &Path) -> Result<Vec<(String, TriMesh)>> {
     let mut files = Vec::new();
-    for sub in std::fs::read_dir(&dir)? {
+    for sub in std::fs::read_dir(dir)? {
         let sub = sub?.path();
         if sub.is_dir() {
             for f in std::fs::read_dir(&sub)? {
@@ -355,14 +351,28 @@ fn stored_scenes(steps: usize) -> Result<Option<Vec<Scene>>> {
         }
     }
     files.sort();
+    files
+        .into_iter()
+        .map(|f| {
+            let name = f
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .unwrap_or("mesh")
+                .to_string();
+            Ok((name, frcd_io::load_mesh(&f)?))
+        })
+        .collect()
+}
+
+/// The stored-mesh scenes: each mesh against a copy of itself sliding diagonally through it,
+/// turning. `None` when the folder is absent.
+fn stored_scenes(steps: usize) -> Result<Option<Vec<Scene>>> {
+    let dir = stored_dir();
+    if !dir.is_dir() {
+        return Ok(None);
+    }
     let mut out = Vec::new();
-    for f in files {
-        let mesh = frcd_io::load_mesh(&f)?;
-        let name = f
-            .file_stem()
-            .and_then(|s| s.to_str())
-            .unwrap_or("mesh")
-            .to_string();
+    for (name, mesh) in stored_meshes(&dir)? {
         out.push(scenes::self_sweep(
             &format!("stored/{name}"),
             Arc::new(mesh),

@@ -31,32 +31,8 @@ fn generated() -> Vec<Scene> {
 }
 
 fn stored(dir: &Path) -> Result<Vec<Scene>> {
-    let mut files = Vec::new();
-    for sub in std::fs::read_dir(dir)? {
-        let sub = sub?.path();
-        if sub.is_dir() {
-            for f in std::fs::read_dir(&sub)? {
-                let f = f?.path();
-                let ext = f
-                    .extension()
-                    .and_then(|e| e.to_str())
-                    .unwrap_or("")
-                    .to_ascii_lowercase();
-                if ext == "stl" || ext == "obj" {
-                    files.push(f);
-                }
-            }
-        }
-    }
-    files.sort();
     let mut out = Vec::new();
-    for f in files {
-        let mesh = frcd_io::load_mesh(&f)?;
-        let name = f
-            .file_stem()
-            .and_then(|s| s.to_str())
-            .unwrap_or("mesh")
-            .to_string();
+    for (name, mesh) in crate::verify::stored_meshes(dir)? {
         let n = mesh.triangle_count() as f64;
         if n * n > MAX_PAIRS {
             println!(

@@ -281,22 +281,20 @@ fn depth_of(tree: &ObbTree) -> u32 {
     best
 }
 
-/// Checks the tree's structure (the shaders trust it) and packs it.
-pub fn pack_tree(tree: &ObbTree, limits: &TexLimits) -> Result<PackedTree, GpuError> {
-    let nodes = tree.nodes();
-    let order = tree.leaf_triangles();
-    let tris = tree.triangles();
+/// The structure the shaders trust: a non-empty tree, node and triangle counts whose indices
+/// are exact in f32, and one leaf-order entry per triangle.
+fn check_tree(tree: &ObbTree) -> Result<(), GpuError> {
+    let (nodes, order, tris) = (tree.nodes(), tree.leaf_triangles(), tree.triangles());
     if nodes.is_empty() || tris.is_empty() {
         return Err(GpuError::InvalidInput("empty tree".into()));
     }
-    for (what, n) in [("nodes", nodes.len()), ("triangles", tris.len())] {
+    for (what, n) in [
+        ("node count (f32-exact indices)", nodes.len()),
+        ("triangle count (f32-exact indices)", tris.len()),
+    ] {
         if n as u64 >= MAX_ITEMS {
             return Err(GpuError::MeshTooLarge {
-                what: if what == "nodes" {
-                    "node count (f32-exact indices)"
-                } else {
-                    "triangle count (f32-exact indices)"
-                },
+                what,
                 needed: n as u64,
                 limit: MAX_ITEMS - 1,
             });
@@ -309,6 +307,14 @@ pub fn pack_tree(tree: &ObbTree, limits: &TexLimits) -> Result<PackedTree, GpuEr
             tris.len()
         )));
     }
+    Ok(())
+}
+
+/// Checks the tree's structure (the shaders trust it) and packs it.
+pub fn pack_tree(tree: &ObbTree, limits: &TexLimits) -> Result<PackedTree, GpuError> {
+    let nodes = tree.nodes();
+    let tris = tree.triangles();
+    check_tree(tree)?;
     let node_layout = TexLayout::new(
         nodes.len(),
         NODE_TEXELS,
@@ -352,29 +358,7 @@ fn pack_into(
     let nodes = tree.nodes();
     let order = tree.leaf_triangles();
     let tris = tree.triangles();
-    if nodes.is_empty() || tris.is_empty() {
-        return Err(GpuError::InvalidInput("empty tree".into()));
-    }
-    for (what, n) in [("nodes", nodes.len()), ("triangles", tris.len())] {
-        if n as u64 >= MAX_ITEMS {
-            return Err(GpuError::MeshTooLarge {
-                what: if what == "nodes" {
-                    "node count (f32-exact indices)"
-                } else {
-                    "triangle count (f32-exact indices)"
-                },
-                needed: n as u64,
-                limit: MAX_ITEMS - 1,
-            });
-        }
-    }
-    if order.len() != tris.len() {
-        return Err(GpuError::InvalidInput(format!(
-            "leaf order has {} entries for {} triangles",
-            order.len(),
-            tris.len()
-        )));
-    }
+    check_tree(tree)?;
     let mut node_texels = vec![[0f32; 4]; node_layout.texel_count()];
     for (i, n) in nodes.iter().enumerate() {
         let ok = if n.is_leaf() {
