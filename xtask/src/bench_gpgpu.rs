@@ -33,50 +33,27 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
 
-struct Opts {
-    levels: Vec<u32>,
-    pairs: usize,
-    bodies: Vec<usize>,
-    frames: Vec<usize>,
-    runs: usize,
-    out: PathBuf,
-}
-
-fn parse(args: &[String]) -> Result<Opts> {
-    let mut o = Opts {
-        levels: vec![1, 2, 3, 4, 5],
-        pairs: 8,
-        bodies: vec![1, 16, 256, 1024, 4096],
-        frames: vec![2, 8, 64],
-        runs: 5,
-        out: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bench"),
-    };
-    let list = |s: Option<&String>| -> Result<Vec<u64>> {
-        s.context("missing value")?
-            .split(',')
-            .map(|x| x.trim().parse::<u64>().map_err(Into::into))
-            .collect()
-    };
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--levels" => o.levels = list(it.next())?.into_iter().map(|x| x as u32).collect(),
-            "--bodies" => o.bodies = list(it.next())?.into_iter().map(|x| x as usize).collect(),
-            "--frame-parts" => {
-                o.frames = list(it.next())?.into_iter().map(|x| x as usize).collect()
-            }
-            "--pairs" => o.pairs = it.next().context("--pairs N")?.parse()?,
-            "--runs" => o.runs = it.next().context("--runs N")?.parse()?,
-            "--out" => o.out = PathBuf::from(it.next().context("--out DIR")?),
-            other => bail!(
-                "bench gpgpu: unknown option '{other}' (--levels L,.. --pairs K --bodies N,.. --frame-parts N,.. --runs N --out DIR)"
-            ),
-        }
-    }
-    if o.levels.is_empty() || o.pairs == 0 || o.runs == 0 {
-        bail!("bench gpgpu: empty levels, zero pairs or zero runs");
-    }
-    Ok(o)
+/// Options of `cargo xtask bench gpgpu`.
+#[derive(clap::Args, Debug)]
+pub struct Opts {
+    /// Icosphere subdivision levels of the pair queries (20·4^level triangles per body).
+    #[arg(long, value_delimiter = ',', default_values_t = [1, 2, 3, 4, 5])]
+    pub levels: Vec<u32>,
+    /// Body pairs per step.
+    #[arg(long, default_value_t = 8, value_parser = crate::positive::<usize>)]
+    pub pairs: usize,
+    /// Body counts of the many-body box pass.
+    #[arg(long, value_delimiter = ',', default_values_t = [1, 16, 256, 1024, 4096])]
+    pub bodies: Vec<usize>,
+    /// Part counts of the many-body frames.
+    #[arg(long = "frame-parts", value_delimiter = ',', default_values_t = [2, 8, 64])]
+    pub frames: Vec<usize>,
+    /// Timed runs per point (the median is reported).
+    #[arg(long, default_value_t = 5, value_parser = crate::positive::<usize>)]
+    pub runs: usize,
+    /// Folder for gpgpu.md and gpgpu.svg.
+    #[arg(long, default_value_os_t = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bench"))]
+    pub out: PathBuf,
 }
 
 /// Median wall time in ms of `runs` calls (after one warm-up call).
@@ -217,8 +194,10 @@ fn crossover(label: &str, sizes: &[String], cpu: &[f64], gpu: &[f64]) -> String 
 }
 
 /// Runs the suite.
-pub fn run(args: &[String]) -> Result<()> {
-    let o = parse(args)?;
+pub fn run(o: Opts) -> Result<()> {
+    if o.levels.is_empty() {
+        bail!("bench gpgpu: empty levels");
+    }
     let load_start = load_average();
     let ctx = GpuContext::headless().context("bench gpgpu needs a GPU adapter")?;
     let info = ctx.adapter_info().clone();
@@ -603,64 +582,65 @@ fn load_average() -> Option<String> {
 }
 
 fn plot(path: &std::path::Path, rows: &[PairRow], threads: usize, adapter: &str) -> Result<()> {
-    use plotters::prelude::*;
+    use crate::plot::{self, Axis, Chart, Legend, Series};
+    // Log-log, drawn as log10 values on linear axes (the axes say "log10").
     let xs: Vec<f64> = rows.iter().map(|r| (r.triangles as f64).log10()).collect();
     let all = rows.iter().flat_map(|r| [r.cpu1, r.cpu_all, r.gpu]);
     let ymax = all.clone().fold(f64::MIN, f64::max).max(1e-3).log10() + 0.3;
     let ymin = all.fold(f64::MAX, f64::min).max(1e-4).log10() - 0.3;
-    let (x0, x1) = (
-        xs.iter().copied().fold(f64::MAX, f64::min) - 0.2,
-        xs.iter().copied().fold(f64::MIN, f64::max) + 0.2,
-    );
-    let root = SVGBackend::new(path, (860, 520)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let caption = format!("pair queries per step: ms vs triangles/body (log-log), GPU = {adapter}");
-    let mut chart = ChartBuilder::on(&root)
-        .caption(caption, ("sans-serif", 16))
-        .margin(15)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(x0..x1, ymin..ymax)?;
-    chart
-        .configure_mesh()
-        .x_desc("log10 triangles per body")
-        .y_desc("log10 ms per step")
-        .draw()?;
-    let series: [(String, Vec<f64>, RGBColor); 3] = [
-        (
-            "CPU 1 thread".into(),
-            rows.iter().map(|r| r.cpu1).collect(),
-            BLUE,
-        ),
-        (
-            format!("CPU {threads} threads"),
-            rows.iter().map(|r| r.cpu_all).collect(),
-            GREEN,
-        ),
-        (
-            "GPU (transfers incl.)".into(),
-            rows.iter().map(|r| r.gpu).collect(),
-            RED,
-        ),
-    ];
-    for (name, ys, c) in series {
-        let pts: Vec<(f64, f64)> = xs
+    let (x0, x1) = plot::extent(xs.iter().copied()).unwrap_or((0.0, 1.0));
+    let series = |name: String, y: fn(&PairRow) -> f64, color| {
+        let pts = xs
             .iter()
-            .zip(&ys)
-            .map(|(&x, &y)| (x, y.max(1e-4).log10()))
+            .zip(rows)
+            .map(|(&x, r)| (x, y(r).max(1e-4).log10()));
+        Series::line(name, color, pts.collect())
+    };
+    let chart = Chart::new(
+        format!("pair queries per step: ms vs triangles/body (log-log), GPU = {adapter}"),
+        Axis::linear("log10 triangles per body", x0 - 0.2..x1 + 0.2),
+        Axis::linear("log10 ms per step", ymin..ymax),
+    )
+    .series(series("CPU 1 thread".into(), |r| r.cpu1, plot::BLUE))
+    .series(series(
+        format!("CPU {threads} threads"),
+        |r| r.cpu_all,
+        plot::GREEN,
+    ))
+    .series(series("GPU (transfers incl.)".into(), |r| r.gpu, plot::RED))
+    .legend(Legend::UpperLeft);
+    plot::write_svg(path, (860, 520), &[chart])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plot_writes_every_series() {
+        let rows: Vec<PairRow> = (1..=4)
+            .map(|l| PairRow {
+                level: l,
+                triangles: 20 * 4usize.pow(l),
+                touching: 10,
+                uncertain: 0,
+                cpu1: 0.01 * 3f64.powi(l as i32),
+                cpu_all: 0.006 * 3f64.powi(l as i32),
+                gpu: 0.5 + 0.1 * l as f64,
+                upload: 1.0,
+            })
             .collect();
-        chart
-            .draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?
-            .label(name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-        chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled())))?;
+        let path =
+            std::env::temp_dir().join(format!("frcd-xtask-gpgpu-{}.svg", std::process::id()));
+        plot(&path, &rows, 2, "test adapter").unwrap();
+        let svg = std::fs::read_to_string(&path).unwrap();
+        for s in [
+            "CPU 1 thread",
+            "CPU 2 threads",
+            "GPU (transfers incl.)",
+            "test adapter",
+        ] {
+            assert!(svg.contains(s), "{s} missing");
+        }
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
-    root.present()?;
-    Ok(())
 }

@@ -10,7 +10,7 @@
 //! Options: `--frames N` (default 1000), `--bogie PATH`, `--cost FILE`, `--out DIR`,
 //! `--oracle-every K` (default 100).
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use frcd_benches::scenes;
 use frcd_geom::{Pose, TriMesh};
 use frcd_hybrid::{Backend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, Mode, Options};
@@ -20,42 +20,24 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
-struct Opts {
-    frames: usize,
-    bogie: PathBuf,
-    cost: Option<PathBuf>,
-    out: PathBuf,
-    oracle_every: usize,
-}
-
-fn parse(args: &[String]) -> Result<Opts> {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
-    let mut o = Opts {
-        frames: 1000,
-        bogie: root.join("testdata/bogie/scene.json"),
-        cost: None,
-        out: root.join("testdata/bench"),
-        oracle_every: 100,
-    };
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        let mut val = || {
-            it.next()
-                .cloned()
-                .with_context(|| format!("{a} needs a value"))
-        };
-        match a.as_str() {
-            "--frames" => o.frames = val()?.parse().context("--frames")?,
-            "--bogie" => o.bogie = val()?.into(),
-            "--cost" => o.cost = Some(val()?.into()),
-            "--out" => o.out = val()?.into(),
-            "--oracle-every" => {
-                o.oracle_every = val()?.parse::<usize>().context("--oracle-every")?.max(1)
-            }
-            other => bail!("bench hybrid: unknown option '{other}'"),
-        }
-    }
-    Ok(o)
+/// Options of `cargo xtask bench hybrid`.
+#[derive(clap::Args, Debug)]
+pub struct Opts {
+    /// Frames per scene.
+    #[arg(long, default_value_t = 1000)]
+    pub frames: usize,
+    /// The bogie demo scene (skipped when absent).
+    #[arg(long, default_value_os_t = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bogie/scene.json"))]
+    pub bogie: PathBuf,
+    /// A cost model file (`frcd calibrate`); the built-in model otherwise.
+    #[arg(long)]
+    pub cost: Option<PathBuf>,
+    /// Folder for hybrid.md and hybrid.svg.
+    #[arg(long, default_value_os_t = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bench"))]
+    pub out: PathBuf,
+    /// Check the CPU exact row against the brute-force oracle every K-th frame (0 counts as 1).
+    #[arg(long, default_value_t = 100)]
+    pub oracle_every: usize,
 }
 
 /// A scene for the benchmark: bodies, exclusions, frames.
@@ -198,8 +180,8 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
 }
 
 /// Runs the suite.
-pub fn run(args: &[String]) -> Result<()> {
-    let o = parse(args)?;
+pub fn run(mut o: Opts) -> Result<()> {
+    o.oracle_every = o.oracle_every.max(1);
     let cost = match &o.cost {
         Some(p) => CostModel::load(p)?,
         None => CostModel::default(),
@@ -366,68 +348,77 @@ pub fn run(args: &[String]) -> Result<()> {
 }
 
 fn plot(path: &std::path::Path, rows: &[Row], adapter: &str) -> Result<()> {
-    use plotters::prelude::*;
+    use crate::plot::{self, Axis, Chart, Series};
     if rows.is_empty() {
         return Ok(());
     }
-    let xs: Vec<f64> = rows.iter().map(|r| r.median_us.max(0.1).log10()).collect();
-    let ys: Vec<f64> = rows.iter().map(|r| 100.0 * r.missed_tri_fraction).collect();
-    let (x0, x1) = (
-        xs.iter().copied().fold(f64::MAX, f64::min) - 0.3,
-        xs.iter().copied().fold(f64::MIN, f64::max) + 0.3,
+    // Time on a log scale, drawn as log10 values (the axis says "log10").
+    let x = |r: &Row| r.median_us.max(0.1).log10();
+    let y = |r: &Row| 100.0 * r.missed_tri_fraction;
+    let (x0, x1) = plot::extent(rows.iter().map(x)).unwrap_or((0.0, 1.0));
+    let y1 = rows.iter().map(y).fold(0.0, f64::max).max(1.0) * 1.15;
+    let mut chart = Chart::new(
+        format!("hybrid scheduler: error vs time per frame (GPU = {adapter})"),
+        Axis::linear("log10 median µs per frame", x0 - 0.3..x1 + 0.3),
+        Axis::linear("% touching triangle pairs missed", -0.05 * y1..y1),
     );
-    let y1 = ys.iter().copied().fold(0.0, f64::max).max(1.0) * 1.15;
-    let root = SVGBackend::new(path, (900, 520)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            format!("hybrid scheduler: error vs time per frame (GPU = {adapter})"),
-            ("sans-serif", 16),
-        )
-        .margin(15)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(x0..x1, -0.05 * y1..y1)?;
-    chart
-        .configure_mesh()
-        .x_desc("log10 median µs per frame")
-        .y_desc("% touching triangle pairs missed")
-        .draw()?;
-    let scenes: Vec<&str> = {
-        let mut v: Vec<&str> = rows.iter().map(|r| r.scene.as_str()).collect();
-        v.dedup();
-        v
-    };
-    let colors = [BLUE, RED, GREEN, MAGENTA, CYAN];
+    let mut scenes: Vec<&str> = rows.iter().map(|r| r.scene.as_str()).collect();
+    scenes.dedup();
+    let colors = [
+        plot::BLUE,
+        plot::RED,
+        plot::GREEN,
+        plot::MAGENTA,
+        plot::CYAN,
+    ];
     for (k, sc) in scenes.iter().enumerate() {
-        let c = colors[k % colors.len()];
-        let pts: Vec<(f64, f64, String)> = rows
-            .iter()
-            .zip(xs.iter().zip(&ys))
-            .filter(|(r, _)| r.scene == *sc)
-            .map(|(r, (&x, &y))| (x, y, format!("{} {}", r.backend, r.mode)))
-            .collect();
-        chart
-            .draw_series(
-                pts.iter()
-                    .map(|(x, y, _)| Circle::new((*x, *y), 4, c.filled())),
-            )?
-            .label(sc.to_string())
-            .legend(move |(x, y)| Circle::new((x, y), 4, c.filled()));
-        chart.draw_series(pts.iter().map(|(x, y, l)| {
-            Text::new(
-                l.clone(),
-                (*x, *y),
-                ("sans-serif", 11).into_font().color(&c),
+        let mine: Vec<&Row> = rows.iter().filter(|r| r.scene == *sc).collect();
+        chart = chart.series(
+            Series::scatter(
+                *sc,
+                colors[k % colors.len()],
+                mine.iter().map(|r| (x(r), y(r))).collect(),
             )
-        }))?;
+            .with_point_labels(
+                mine.iter()
+                    .map(|r| format!("{} {}", r.backend, r.mode))
+                    .collect(),
+            ),
+        );
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
-    root.present()?;
-    Ok(())
+    plot::write_svg(path, (900, 520), &[chart])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plot_writes_every_series() {
+        let row = |scene: &str, backend, mode, us, miss| Row {
+            scene: scene.to_string(),
+            backend,
+            mode,
+            median_us: us,
+            mean_us: us,
+            p95_us: us,
+            missed_bodies: 0,
+            body_frames: 10,
+            missed_tri_fraction: miss,
+            stages: String::new(),
+        };
+        let rows = vec![
+            row("bogie", "cpu", "exact", 120.0, 0.0),
+            row("bogie", "image", "fast", 900.0, 0.02),
+            row("grid", "cpu", "exact", 40.0, 0.0),
+            row("grid", "gpgpu", "exact", 300.0, 0.0),
+        ];
+        let path =
+            std::env::temp_dir().join(format!("frcd-xtask-hybrid-{}.svg", std::process::id()));
+        plot(&path, &rows, "test adapter").unwrap();
+        let svg = std::fs::read_to_string(&path).unwrap();
+        for s in ["bogie", "grid", "image fast", "gpgpu exact", "test adapter"] {
+            assert!(svg.contains(s), "{s} missing");
+        }
+    }
 }

@@ -16,7 +16,7 @@
 //! Options: `--resolutions 64,128,...` (default 64..2048 by powers of two), `--runs N` timed runs
 //! per point (median, default 5), `--out DIR` (default testdata/bench).
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use frcd_geom::{DQuat, DVec2, DVec3, Pose, TriMesh, shapes};
 use frcd_image::{GpuMesh, ImageDetector, ImageOptions, ImageScratch};
 use std::f64::consts::PI;
@@ -141,29 +141,27 @@ impl Bench<'_> {
     }
 }
 
+/// Options of `cargo xtask bench image`.
+#[derive(clap::Args, Debug)]
+pub struct Opts {
+    /// Resolutions (pixels across the overlap region's longer side).
+    #[arg(long, value_delimiter = ',', default_values_t = [64, 128, 256, 512, 1024, 2048])]
+    pub resolutions: Vec<u32>,
+    /// Timed runs per point (the median is reported).
+    #[arg(long, default_value_t = 5, value_parser = crate::positive::<usize>)]
+    pub runs: usize,
+    /// Folder for image.md and image.svg.
+    #[arg(long, default_value_os_t = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bench"))]
+    pub out: PathBuf,
+}
+
 /// Runs the suite.
-pub fn run(args: &[String]) -> Result<()> {
-    let mut resolutions: Vec<u32> = vec![64, 128, 256, 512, 1024, 2048];
-    let mut runs = 5usize;
-    let mut out_dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bench");
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--resolutions" => {
-                resolutions = it
-                    .next()
-                    .context("--resolutions needs a list")?
-                    .split(',')
-                    .map(|s| s.trim().parse())
-                    .collect::<Result<_, _>>()?;
-            }
-            "--runs" => runs = it.next().context("--runs needs N")?.parse()?,
-            "--out" => out_dir = PathBuf::from(it.next().context("--out needs DIR")?),
-            other => bail!(
-                "bench image: unknown option '{other}' (--resolutions L, --runs N, --out DIR)"
-            ),
-        }
-    }
+pub fn run(o: Opts) -> Result<()> {
+    let Opts {
+        resolutions,
+        runs,
+        out: out_dir,
+    } = o;
     let det = match ImageDetector::headless() {
         Ok(d) => d,
         Err(e) => {
@@ -349,105 +347,96 @@ fn table_line(r: &Row) -> String {
 }
 
 fn plot(rows: &[Row], path: &std::path::Path, adapter: &str) -> Result<()> {
-    use plotters::prelude::*;
-    let root = SVGBackend::new(path, (1100, 460)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let (left, right) = root.split_horizontally(550);
+    use crate::plot::{self, Axis, Chart, Legend, Series};
     let scenes = ["boxes", "lens", "corner", "edge"];
-    let colors = [RED, BLUE, GREEN, MAGENTA];
-    let rmin = rows.iter().map(|r| r.resolution).min().unwrap_or(64) as f64;
-    let rmax = rows.iter().map(|r| r.resolution).max().unwrap_or(2048) as f64;
+    let colors = [plot::RED, plot::BLUE, plot::GREEN, plot::MAGENTA];
+    let res = |r: &Row| r.resolution as f64;
+    let (rmin, rmax) = plot::extent(rows.iter().map(res)).unwrap_or((64.0, 2048.0));
     let tmax = rows.iter().map(|r| r.ms).fold(1.0, f64::max);
     let tmin = rows
         .iter()
         .map(|r| r.ms)
         .fold(f64::INFINITY, f64::min)
         .max(1e-3);
-    let mut chart = ChartBuilder::on(&left)
-        .caption(format!("query time ({adapter})"), ("sans-serif", 14))
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(55)
-        .build_cartesian_2d(
-            (rmin * 0.9..rmax * 1.1).log_scale(),
-            (tmin * 0.8..tmax * 1.25).log_scale(),
-        )?;
-    chart
-        .configure_mesh()
-        .x_desc("resolution (pixels across the overlap)")
-        .y_desc("ms per query")
-        .draw()?;
-    for (s, c) in scenes.iter().zip(colors) {
-        let pts: Vec<(f64, f64)> = rows
-            .iter()
-            .filter(|r| r.scene == *s)
-            .map(|r| (r.resolution as f64, r.ms))
-            .collect();
-        chart
-            .draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?
-            .label(*s)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], c));
-        chart.draw_series(pts.iter().map(|p| Circle::new(*p, 3, c.filled())))?;
-    }
-    chart
-        .configure_series_labels()
-        .border_style(BLACK)
-        .background_style(WHITE.mix(0.8))
-        .draw()?;
-
-    let errs: Vec<f64> = rows
+    // Volume scenes plot their relative volume error, penetration scenes the depth missed.
+    let error = |r: &Row| r.volume_error.or(r.missed).filter(|e| *e > 0.0);
+    let emax = rows.iter().filter_map(error).fold(1e-6, f64::max);
+    let emin = rows
         .iter()
-        .filter_map(|r| r.volume_error.or(r.missed))
-        .filter(|e| *e > 0.0)
-        .collect();
-    let emax = errs.iter().copied().fold(1e-6, f64::max);
-    let emin = errs
-        .iter()
-        .copied()
+        .filter_map(error)
         .fold(f64::INFINITY, f64::min)
         .min(emax / 10.0);
-    let mut chart = ChartBuilder::on(&right)
-        .caption(
-            "error: relative volume error (boxes, lens); missed depth (corner, edge)",
-            ("sans-serif", 13),
+    let x_axis = || {
+        Axis::log(
+            "resolution (pixels across the overlap)",
+            rmin * 0.9..rmax * 1.1,
         )
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(60)
-        .build_cartesian_2d(
-            (rmin * 0.9..rmax * 1.1).log_scale(),
-            (emin * 0.5..emax * 2.0).log_scale(),
-        )?;
-    chart
-        .configure_mesh()
-        .x_desc("resolution (pixels across the overlap)")
-        .y_desc("error")
-        .draw()?;
-    for (s, c) in scenes.iter().zip(colors) {
-        let pts: Vec<(f64, f64)> = rows
-            .iter()
-            .filter(|r| r.scene == *s)
-            .filter_map(|r| {
-                r.volume_error
-                    .or(r.missed)
-                    .map(|e| (r.resolution as f64, e))
-            })
-            .filter(|(_, e)| *e > 0.0)
-            .collect();
-        if pts.is_empty() {
-            continue;
+    };
+    let panel = |caption: String, size, y: Axis, y_labels, value: &dyn Fn(&Row) -> Option<f64>| {
+        let mut chart = Chart::new(caption, x_axis(), y).caption_size(size);
+        (chart.margin, chart.x_label_area, chart.y_label_area) = (10, 35, y_labels);
+        chart.legend = Legend::MiddleRight;
+        for (s, c) in scenes.iter().zip(colors) {
+            let pts = rows.iter().filter(|r| r.scene == *s);
+            let pts = pts.filter_map(|r| value(r).map(|v| (res(r), v)));
+            chart = chart.series(Series::line(*s, c, pts.collect()));
         }
         chart
-            .draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?
-            .label(*s)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], c));
-        chart.draw_series(pts.iter().map(|p| Circle::new(*p, 3, c.filled())))?;
+    };
+    let time = panel(
+        format!("query time ({adapter})"),
+        14,
+        Axis::log("ms per query", tmin * 0.8..tmax * 1.25),
+        55,
+        &|r| Some(r.ms),
+    );
+    let err = panel(
+        "error: relative volume error (boxes, lens); missed depth (corner, edge)".into(),
+        13,
+        Axis::log("error", emin * 0.5..emax * 2.0),
+        60,
+        &error,
+    );
+    plot::write_svg(path, (1100, 460), &[time, err])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plot_writes_every_series() {
+        let mut rows = Vec::new();
+        for scene in ["boxes", "lens", "corner", "edge"] {
+            for (k, resolution) in [64u32, 256, 1024].into_iter().enumerate() {
+                let e = 0.1 / (k + 1) as f64;
+                let volume = matches!(scene, "boxes" | "lens");
+                rows.push(Row {
+                    scene,
+                    resolution,
+                    pixels: (resolution, resolution),
+                    layers: [2, 2],
+                    ms: 0.5 * (k + 1) as f64,
+                    volume_error: volume.then_some(e),
+                    volume_estimate: volume.then_some(e),
+                    missed: (!volume).then_some(e / 2.0),
+                    pixel_size: 1.0 / resolution as f64,
+                    depth_bound: 1e-6,
+                });
+            }
+        }
+        let path =
+            std::env::temp_dir().join(format!("frcd-xtask-image-{}.svg", std::process::id()));
+        plot(&rows, &path, "test adapter").unwrap();
+        let svg = std::fs::read_to_string(&path).unwrap();
+        for s in [
+            "boxes",
+            "lens",
+            "corner",
+            "edge",
+            "query time (test adapter)",
+        ] {
+            assert!(svg.contains(s), "{s} missing");
+        }
     }
-    chart
-        .configure_series_labels()
-        .border_style(BLACK)
-        .background_style(WHITE.mix(0.8))
-        .draw()?;
-    root.present()?;
-    Ok(())
 }

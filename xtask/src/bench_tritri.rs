@@ -24,40 +24,18 @@ use std::time::Instant;
 /// Samples per repetition (the best one counts).
 const BURST: usize = 5;
 
-struct Opts {
-    pairs: usize,
-    reps: usize,
-    out: PathBuf,
-}
-
-fn parse(args: &[String]) -> Result<Opts> {
-    let mut o = Opts {
-        pairs: 5000,
-        reps: 15,
-        out: PathBuf::from("testdata/bench"),
-    };
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        let mut val = |name: &str| {
-            it.next()
-                .with_context(|| format!("{name} needs a value"))
-                .cloned()
-        };
-        match a.as_str() {
-            "--pairs" => o.pairs = val("--pairs")?.parse().context("--pairs: a count")?,
-            "--reps" => o.reps = val("--reps")?.parse().context("--reps: a count")?,
-            "--out" => o.out = PathBuf::from(val("--out")?),
-            "-h" | "--help" => {
-                println!("usage: cargo xtask bench tritri [--pairs N] [--reps R] [--out DIR]");
-                std::process::exit(0);
-            }
-            other => bail!("bench tritri: unknown argument '{other}'"),
-        }
-    }
-    if o.pairs == 0 || o.reps == 0 {
-        bail!("bench tritri: --pairs and --reps must be positive");
-    }
-    Ok(o)
+/// Options of `cargo xtask bench tritri`.
+#[derive(clap::Args, Debug)]
+pub struct Opts {
+    /// Triangle pairs per intersection ratio.
+    #[arg(long, default_value_t = 5000, value_parser = crate::positive::<usize>)]
+    pub pairs: usize,
+    /// Repetitions (the median is reported).
+    #[arg(long, default_value_t = 15, value_parser = crate::positive::<usize>)]
+    pub reps: usize,
+    /// Folder for tritri.md and tritri.svg.
+    #[arg(long, default_value = "testdata/bench")]
+    pub out: PathBuf,
 }
 
 /// One timed pass over `items`, each worth `per` tests: (ns per test, hits per pass).
@@ -219,8 +197,7 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 /// Entry point of `cargo xtask bench tritri`.
-pub fn run(args: &[String]) -> Result<()> {
-    let o = parse(args)?;
+pub fn run(o: Opts) -> Result<()> {
     let nk = KERNELS.len();
     let nl = LEAF_KERNELS.len();
     let sets: Vec<Set> = RATIOS
@@ -421,53 +398,57 @@ pub fn run(args: &[String]) -> Result<()> {
 }
 
 fn plot(path: &std::path::Path, table: &[Vec<f64>]) -> Result<()> {
-    use plotters::prelude::*;
+    use crate::plot::{self, Axis, Chart, Legend, Series};
     let ymax = table.iter().flatten().fold(0.0f64, |a, &b| a.max(b)) * 1.15;
-    let root = SVGBackend::new(path, (800, 500)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            "triangle-triangle tests: ns per test vs intersection ratio",
-            ("sans-serif", 20),
-        )
-        .margin(15)
-        .x_label_area_size(40)
-        .y_label_area_size(55)
-        .build_cartesian_2d(0f64..100f64, 0f64..ymax)?;
-    chart
-        .configure_mesh()
-        .x_desc("intersecting pairs (%)")
-        .y_desc("ns / test")
-        .draw()?;
     let colors = [
-        RED,
-        BLUE,
-        GREEN,
-        MAGENTA,
-        CYAN,
-        BLACK,
-        RGBColor(255, 140, 0),
-        RGBColor(128, 128, 128),
+        plot::RED,
+        plot::BLUE,
+        plot::GREEN,
+        plot::MAGENTA,
+        plot::CYAN,
+        plot::BLACK,
+        plot::ORANGE,
+        plot::GREY,
     ];
+    let mut chart = Chart::new(
+        "triangle-triangle tests: ns per test vs intersection ratio",
+        Axis::linear("intersecting pairs (%)", 0.0..100.0),
+        Axis::linear("ns / test", 0.0..ymax),
+    )
+    .caption_size(20)
+    .legend(Legend::LowerRight);
+    chart.y_label_area = 55;
     for (mi, name) in KERNELS.iter().enumerate() {
-        let pts: Vec<(f64, f64)> = RATIOS
+        let pts = RATIOS
+            .iter()
+            .zip(table)
+            .map(|(&r, row)| (r as f64, row[mi]));
+        chart = chart.series(Series::line(*name, colors[mi], pts.collect()));
+    }
+    plot::write_svg(path, (800, 500), &[chart])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plot_writes_every_series() {
+        let table: Vec<Vec<f64>> = RATIOS
             .iter()
             .enumerate()
-            .map(|(ri, &r)| (r as f64, table[ri][mi]))
+            .map(|(ri, _)| {
+                (0..KERNELS.len())
+                    .map(|k| 10.0 + (k * 3 + ri) as f64)
+                    .collect()
+            })
             .collect();
-        let c = colors[mi];
-        chart
-            .draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?
-            .label(*name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-        chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled())))?;
+        let path =
+            std::env::temp_dir().join(format!("frcd-xtask-tritri-{}.svg", std::process::id()));
+        plot(&path, &table).unwrap();
+        let svg = std::fs::read_to_string(&path).unwrap();
+        for s in KERNELS {
+            assert!(svg.contains(s), "{s} missing");
+        }
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
-    root.present()?;
-    Ok(())
 }

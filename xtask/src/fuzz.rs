@@ -59,30 +59,23 @@ fn parse_stats(log: &str) -> Stats {
     s
 }
 
+/// Options of `cargo xtask fuzz`.
+#[derive(clap::Args, Debug)]
+pub struct Opts {
+    /// Seconds per target.
+    #[arg(long, default_value_t = 60, value_parser = crate::positive::<u64>)]
+    pub seconds: u64,
+    /// Targets to run (all when none is named).
+    #[arg(value_parser = clap::builder::PossibleValuesParser::new(TARGETS))]
+    pub targets: Vec<String>,
+}
+
 /// Runs the task.
-pub fn run(args: &[String]) -> Result<()> {
-    let mut seconds: u64 = 60;
-    let mut targets: Vec<String> = Vec::new();
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--seconds" => {
-                seconds = it
-                    .next()
-                    .context("--seconds needs a value")?
-                    .parse()
-                    .context("--seconds takes a whole number")?;
-            }
-            t if TARGETS.contains(&t) => targets.push(t.to_owned()),
-            other => bail!(
-                "unknown argument '{other}' (usage: cargo xtask fuzz [--seconds N] [{}])",
-                TARGETS.join("|")
-            ),
-        }
-    }
-    if seconds == 0 {
-        bail!("--seconds must be at least 1");
-    }
+pub fn run(o: Opts) -> Result<()> {
+    let Opts {
+        seconds,
+        mut targets,
+    } = o;
     if targets.is_empty() {
         targets = TARGETS.iter().map(|s| s.to_string()).collect();
     }

@@ -12,7 +12,7 @@
 //!
 //! Axes: x along the track, y to the left, z up; top of rail at z = 0.
 
-use anyhow::{Context, Result, bail, ensure};
+use anyhow::{Context, Result, ensure};
 use frcd_geom::shapes::{self, CoilSpringParams, Frame, WheelsetParams};
 use frcd_geom::{DQuat, DVec2, DVec3, Pose, TriMesh};
 use frcd_io::{
@@ -730,16 +730,17 @@ fn check(scene: &Scene) -> Result<Checked> {
 // ---------------------------------------------------------------------------------------------
 // Driver
 
-pub fn run(args: &[String]) -> Result<()> {
-    // Default: the workspace's testdata/bogie, wherever the task is run from.
-    let mut out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bogie");
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--out" => out = PathBuf::from(it.next().context("--out needs a folder")?),
-            other => bail!("gen-bogie: unknown argument '{other}' (usage: gen-bogie [--out DIR])"),
-        }
-    }
+/// Options of `cargo xtask gen-bogie`.
+#[derive(clap::Args, Debug)]
+pub struct Opts {
+    /// Folder the scene is written to.
+    #[arg(long, default_value_os_t = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bogie"))]
+    pub out: PathBuf,
+}
+
+/// Entry point of `cargo xtask gen-bogie`.
+pub fn run(o: Opts) -> Result<()> {
+    let out = o.out;
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
 
     // Parts.

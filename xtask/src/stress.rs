@@ -22,42 +22,18 @@ use std::time::Instant;
 
 type Pair = ([DVec3; 3], [DVec3; 3]);
 
-struct Opts {
-    pairs: usize,
-    seed: u64,
-    show: usize,
-}
-
-fn parse(args: &[String]) -> Result<Opts> {
-    let mut o = Opts {
-        pairs: 400,
-        seed: 2024,
-        show: 3,
-    };
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        let mut val = |name: &str| {
-            it.next()
-                .with_context(|| format!("{name} needs a value"))
-                .cloned()
-        };
-        match a.as_str() {
-            "--pairs" => o.pairs = val("--pairs")?.parse().context("--pairs: a count")?,
-            "--seed" => o.seed = val("--seed")?.parse().context("--seed: an integer")?,
-            "--show" => o.show = val("--show")?.parse().context("--show: a count")?,
-            "-h" | "--help" => {
-                println!(
-                    "usage: cargo xtask stress [--pairs N per family and variant (default 400)] [--seed S] [--show K failures]"
-                );
-                std::process::exit(0);
-            }
-            other => bail!("stress: unknown argument '{other}'"),
-        }
-    }
-    if o.pairs == 0 {
-        bail!("stress: --pairs must be positive");
-    }
-    Ok(o)
+/// Options of `cargo xtask stress`.
+#[derive(clap::Args, Debug)]
+pub struct Opts {
+    /// Pairs per family and variant (as built, rotated).
+    #[arg(long, default_value_t = 400, value_parser = crate::positive::<usize>)]
+    pub pairs: usize,
+    /// Seed of the pair generators.
+    #[arg(long, default_value_t = 2024)]
+    pub seed: u64,
+    /// Failures printed per method and family.
+    #[arg(long, default_value_t = 3)]
+    pub show: usize,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -328,8 +304,7 @@ struct Tally {
 }
 
 /// Entry point of `cargo xtask stress`.
-pub fn run(args: &[String]) -> Result<()> {
-    let o = parse(args)?;
+pub fn run(o: Opts) -> Result<()> {
     let t0 = Instant::now();
     let mut rng = StdRng::seed_from_u64(o.seed);
     let mut rows: Vec<(String, Tally)> = Vec::new();

@@ -413,24 +413,32 @@ fn demo_scene() -> Result<Scene> {
     })
 }
 
+/// Options of `cargo xtask verify`.
+#[derive(clap::Args, Debug)]
+pub struct Opts {
+    /// Keep only the scenes whose name contains this.
+    #[arg(long, value_name = "SUBSTR")]
+    pub scene: Option<String>,
+    /// Keep only the backends whose name contains this.
+    #[arg(long, value_name = "SUBSTR")]
+    pub backend: Option<String>,
+    /// Skip the stored meshes (../shared/meshes).
+    #[arg(long)]
+    pub no_stored: bool,
+    /// Shorten every scene to a few steps.
+    #[arg(long)]
+    pub quick: bool,
+}
+
 /// Runs the task.
-pub fn run(args: &[String]) -> Result<()> {
-    let mut scene_filter: Option<String> = None;
-    let mut backend_filter: Option<String> = None;
-    let mut stored = true;
-    let mut quick = false;
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--scene" => scene_filter = it.next().cloned(),
-            "--backend" => backend_filter = it.next().cloned(),
-            "--no-stored" => stored = false,
-            "--quick" => quick = true,
-            other => bail!(
-                "verify: unknown option '{other}' (--scene S, --backend S, --no-stored, --quick)"
-            ),
-        }
-    }
+pub fn run(o: Opts) -> Result<()> {
+    let Opts {
+        scene: scene_filter,
+        backend: backend_filter,
+        no_stored,
+        quick,
+    } = o;
+    let stored = !no_stored;
     let mut all = scenes::verify_set();
     all.push(demo_scene()?);
     if stored {

@@ -1,0 +1,246 @@
+//! The bodies of the fuzz targets, as plain functions: each takes the fuzzer's bytes, returns
+//! normally on any input the library must accept or refuse with a typed error, and panics
+//! (assertion) only when a library invariant is broken.
+//!
+//! The cargo-fuzz targets in `fuzz_targets/` are one line each (`fuzz_target!` calling the
+//! function of the same name). The stable smoke test `xtask/tests/fuzz_smoke.rs` includes this
+//! file with `#[path]` (the fuzz crate is not a workspace member: it needs nightly) and replays
+//! every committed seed and regression input plus deterministic mutations of them through the
+//! same functions. This file must therefore build on stable and depend only on crates both
+//! places have: frcd-geom (feature `shapes`), frcd-obb, frcd-io, serde_json.
+
+use frcd_geom::{DQuat, DVec3, Pose, TriMesh, shapes};
+use frcd_obb::{BuildOptions, FitMethod, Mode, ObbTree, Request, collide, oracle};
+use std::path::Path;
+
+/// A target's body: the fuzzer's bytes in, a panic only on a broken invariant.
+pub type Body = fn(&[u8]);
+
+/// The targets, by name, with their bodies (in the order `cargo xtask fuzz` runs them: cheap
+/// parsers first).
+pub const TARGETS: [(&str, Body); 6] = [
+    ("stl", stl),
+    ("obj", obj),
+    ("scene", scene),
+    ("trajectory", trajectory),
+    ("mesh_tree", mesh_tree),
+    ("collide_oracle", collide_oracle),
+];
+
+/// STL reader (ASCII and binary): any bytes give a mesh or a typed error, never a panic.
+pub fn stl(data: &[u8]) {
+    if let Ok(mesh) = frcd_io::parse_stl(data, Path::new("fuzz.stl")) {
+        // A loaded mesh is valid: every index in range, every coordinate finite.
+        assert!(mesh.triangle_count() > 0);
+        assert!(mesh.vertices().iter().all(|v| v.is_finite()));
+        let n = mesh.vertex_count() as u32;
+        assert!(mesh.indices().iter().flatten().all(|&i| i < n));
+    }
+}
+
+/// OBJ reader (one mesh and per-object): any bytes give meshes or a typed error.
+pub fn obj(data: &[u8]) {
+    let path = Path::new("fuzz.obj");
+    let one = frcd_io::parse_obj(data, path);
+    let per_object = frcd_io::parse_obj_objects(data, path);
+    if let Ok(mesh) = &one {
+        assert!(mesh.vertices().iter().all(|v| v.is_finite()));
+        let n = mesh.vertex_count() as u32;
+        assert!(mesh.indices().iter().flatten().all(|&i| i < n));
+    }
+    // Both readers see the same faces: when the per-object reader succeeds, so does the
+    // merged one, with as many triangles in total.
+    if let Ok(objects) = &per_object {
+        let total: usize = objects.iter().map(|o| o.mesh.triangle_count()).sum();
+        let merged = one
+            .as_ref()
+            .expect("per-object read succeeded, merged read failed");
+        assert_eq!(merged.triangle_count(), total);
+    }
+}
+
+/// Scene file parser: any text gives a SceneFile or a typed error naming a line; a parsed scene
+/// writes back to JSON that parses to the same value.
+pub fn scene(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    let path = Path::new("fuzz.json");
+    if let Ok(spec) = frcd_io::SceneFile::parse(text, path) {
+        let again = serde_json::to_string(&spec).expect("a parsed scene serialises");
+        let back = frcd_io::SceneFile::parse(&again, path).expect("written scene parses");
+        assert_eq!(
+            serde_json::to_value(&back).unwrap(),
+            serde_json::to_value(&spec).unwrap()
+        );
+    }
+}
+
+/// Trajectory CSV parser: any bytes give rows or a typed error naming a line; every row's pose
+/// is valid and its line lies in the file.
+pub fn trajectory(data: &[u8]) {
+    let path = Path::new("fuzz.csv");
+    if let Ok(t) = frcd_io::Trajectory::parse(data, path) {
+        let lines = 1 + data.iter().filter(|&&b| b == b'\n').count();
+        for r in &t.rows {
+            assert!(
+                r.pose.is_valid(),
+                "row at line {} has an invalid pose",
+                r.line
+            );
+            assert!(r.line >= 1 && r.line <= lines, "line {} of {lines}", r.line);
+            assert!(!r.body.is_empty());
+        }
+    }
+}
+
+/// `TriMesh::new` on raw vertices and indices (NaN, infinities, huge and subnormal coordinates,
+/// out-of-range indices), then `ObbTree::build` on every mesh it accepts; the tree's
+/// self-collision must equal the exact oracle's pairs.
+pub fn mesh_tree(data: &[u8]) {
+    if data.len() < 2 {
+        return;
+    }
+    let (head, rest) = data.split_at(2);
+    let nv = (head[0] % 12) as usize;
+    let leaf = 1 + (head[1] % 4) as u32;
+    let fit = [
+        FitMethod::VertexCovariance,
+        FitMethod::AreaWeighted,
+        FitMethod::HullSurface,
+    ][(head[1] / 4 % 3) as usize];
+    let mut words = rest
+        .chunks_exact(8)
+        .map(|c| u64::from_le_bytes(c.try_into().unwrap()));
+    let mut vertices = Vec::with_capacity(nv);
+    for _ in 0..nv {
+        let mut c = [0.0; 3];
+        for x in &mut c {
+            *x = f64::from_bits(words.next().unwrap_or(0));
+        }
+        vertices.push(DVec3::from_array(c));
+    }
+    let mut indices = Vec::new();
+    for w in words {
+        // Mostly in range, sometimes not.
+        let m = nv as u32 + 1;
+        let idx = |s: u32| ((w >> s) as u32 & 0xFF) % m.max(1);
+        indices.push([idx(0), idx(8), idx(16)]);
+        if indices.len() >= 24 {
+            break;
+        }
+    }
+    let Ok(mesh) = TriMesh::new(vertices, indices) else {
+        return;
+    };
+    let _ = mesh.topology();
+    let options = BuildOptions {
+        fit,
+        max_leaf_triangles: leaf,
+    };
+    let tree = ObbTree::build(&mesh, &options);
+    let request = Request {
+        mode: Mode::AllPairs,
+        ..Request::default()
+    };
+    let got = collide(&tree, &Pose::IDENTITY, &tree, &Pose::IDENTITY, &request);
+    let want = oracle::pairs(&mesh, &Pose::IDENTITY, &mesh, &Pose::IDENTITY);
+    assert_eq!(got.pairs, want, "self-collision differs from the oracle");
+}
+
+/// Reads the differential target's input: bytes in order, zeros after the end.
+struct Bytes<'a>(&'a [u8]);
+
+impl Bytes<'_> {
+    fn byte(&mut self) -> u8 {
+        match self.0.split_first() {
+            Some((b, rest)) => {
+                self.0 = rest;
+                *b
+            }
+            None => 0,
+        }
+    }
+    fn small(&mut self) -> f64 {
+        (self.byte() as i8) as f64
+    }
+}
+
+fn small_mesh(b: &mut Bytes, scale: f64) -> Option<TriMesh> {
+    let kind = b.byte();
+    if kind.is_multiple_of(4) {
+        // A closed box, so containment is exercised.
+        let h = DVec3::new(
+            1.0 + (b.byte() % 16) as f64,
+            1.0 + (b.byte() % 16) as f64,
+            1.0 + (b.byte() % 16) as f64,
+        ) * scale;
+        return Some(shapes::cuboid(h));
+    }
+    let nv = 3 + (b.byte() % 6) as usize;
+    let v: Vec<DVec3> = (0..nv)
+        .map(|_| DVec3::new(b.small(), b.small(), b.small()) * scale)
+        .collect();
+    let nt = 1 + (b.byte() % 8) as usize;
+    let t: Vec<[u32; 3]> = (0..nt)
+        .map(|_| {
+            let mut i = || (b.byte() as usize % nv) as u32;
+            [i(), i(), i()]
+        })
+        .collect();
+    TriMesh::new(v, t).ok()
+}
+
+fn small_pose(b: &mut Bytes, scale: f64) -> Pose {
+    let t = DVec3::new(b.small(), b.small(), b.small()) * scale / 4.0;
+    let q = DQuat::from_xyzw(b.small(), b.small(), b.small(), b.small());
+    if b.byte().is_multiple_of(2) || q.length_squared() == 0.0 {
+        Pose::from_translation(t)
+    } else {
+        Pose::new(t, q)
+    }
+}
+
+/// Differential: `collide` (all pairs, solid or surface mode) against `frcd_obb::oracle` on
+/// small meshes and poses. Coordinates are small integers scaled by a power of two (so touching,
+/// coplanar and degenerate configurations are common), sometimes closed boxes (containment).
+/// The two answers must be equal.
+pub fn collide_oracle(data: &[u8]) {
+    let mut b = Bytes(data);
+    let flags = b.byte();
+    // 2^-8 .. 2^+990: small, ordinary and huge magnitudes.
+    let exp = [-8, 0, 0, 0, 20, 500, 990][(b.byte() % 7) as usize];
+    let scale = 2f64.powi(exp) / 4.0;
+    let (Some(ma), Some(mb)) = (small_mesh(&mut b, scale), small_mesh(&mut b, scale)) else {
+        return;
+    };
+    let (pa, pb) = (small_pose(&mut b, scale), small_pose(&mut b, scale));
+    let solid = flags & 1 == 1;
+    let options = BuildOptions {
+        max_leaf_triangles: 1 + (flags >> 1) as u32 % 3,
+        ..BuildOptions::default()
+    };
+    let (ta, tb) = (ObbTree::build(&ma, &options), ObbTree::build(&mb, &options));
+    let request = Request {
+        mode: Mode::AllPairs,
+        solid,
+        ..Request::default()
+    };
+    let got = collide(&ta, &pa, &tb, &pb, &request);
+    let want = oracle::answer(&ma, &pa, &mb, &pb, solid);
+    assert_eq!(got.pairs, want.pairs, "pairs differ");
+    assert_eq!(got.contained, want.contained, "containment differs");
+    assert_eq!(got.collide, want.collide());
+    // First contact agrees on the boolean.
+    let first = collide(
+        &ta,
+        &pa,
+        &tb,
+        &pb,
+        &Request {
+            mode: Mode::FirstContact,
+            ..request
+        },
+    );
+    assert_eq!(first.collide, want.collide());
+}
