@@ -1,6 +1,6 @@
 #![doc = include_str!("../README.md")]
 #![forbid(unsafe_code)]
-//! # frcd-hybrid
+//! ## Overview
 //!
 //! The thesis's hybrid scheduler for many-body interference checking, stage by stage:
 //!

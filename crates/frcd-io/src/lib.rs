@@ -1,6 +1,6 @@
 #![doc = include_str!("../README.md")]
 #![forbid(unsafe_code)]
-//! # frcd-io
+//! ## Overview
 //!
 //! Files in and out of frcd:
 //!

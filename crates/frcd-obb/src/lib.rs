@@ -1,8 +1,6 @@
 #![doc = include_str!("../README.md")]
 #![forbid(unsafe_code)]
-//! # frcd-obb
-//!
-//! FRCD: OBB trees on the CPU with exact triangle tests.
+//! ## Overview
 //!
 //! - [`ObbTree::build`]: Gottschalk's OBBTree over a [`frcd_geom::TriMesh`] (fit rule
 //!   selectable, mean-of-centroids split, configurable leaf size, flat depth-first nodes);

@@ -1,8 +1,6 @@
 #![doc = include_str!("../README.md")]
 #![forbid(unsafe_code)]
-//! # frcd-tritri
-//!
-//! Triangle-triangle overlap tests. Triangles are closed sets: touching counts as intersecting.
+//! ## Overview
 //!
 //! | function | method | arithmetic |
 //! |---|---|---|
