@@ -37,22 +37,37 @@ use std::time::Instant;
 #[derive(clap::Args, Debug)]
 pub struct Opts {
     /// Icosphere subdivision levels of the pair queries (20·4^level triangles per body).
-    #[arg(long, value_delimiter = ',', default_values_t = [1, 2, 3, 4, 5])]
+    #[arg(
+        long,
+        value_name = "L,..",
+        value_delimiter = ',',
+        default_value = "1,2,3,4,5"
+    )]
     pub levels: Vec<u32>,
     /// Body pairs per step.
-    #[arg(long, default_value_t = 8, value_parser = crate::positive::<usize>)]
+    #[arg(long, value_name = "K", default_value_t = 8, value_parser = crate::positive::<usize>)]
     pub pairs: usize,
     /// Body counts of the many-body box pass.
-    #[arg(long, value_delimiter = ',', default_values_t = [1, 16, 256, 1024, 4096])]
+    #[arg(
+        long,
+        value_name = "N,..",
+        value_delimiter = ',',
+        default_value = "1,16,256,1024,4096"
+    )]
     pub bodies: Vec<usize>,
     /// Part counts of the many-body frames.
-    #[arg(long = "frame-parts", value_delimiter = ',', default_values_t = [2, 8, 64])]
+    #[arg(
+        long = "frame-parts",
+        value_name = "N,..",
+        value_delimiter = ',',
+        default_value = "2,8,64"
+    )]
     pub frames: Vec<usize>,
     /// Timed runs per point (the median is reported).
-    #[arg(long, default_value_t = 5, value_parser = crate::positive::<usize>)]
+    #[arg(long, value_name = "N", default_value_t = 5, value_parser = crate::positive::<usize>)]
     pub runs: usize,
     /// Folder for gpgpu.md and gpgpu.svg.
-    #[arg(long, default_value_os_t = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bench"))]
+    #[arg(long, value_name = "DIR", default_value_os_t = crate::workspace_path("testdata/bench"))]
     pub out: PathBuf,
 }
 

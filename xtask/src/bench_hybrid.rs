@@ -24,19 +24,19 @@ use std::time::Instant;
 #[derive(clap::Args, Debug)]
 pub struct Opts {
     /// Frames per scene.
-    #[arg(long, default_value_t = 1000)]
+    #[arg(long, value_name = "N", default_value_t = 1000)]
     pub frames: usize,
     /// The bogie demo scene (skipped when absent).
-    #[arg(long, default_value_os_t = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bogie/scene.json"))]
+    #[arg(long, value_name = "PATH", default_value_os_t = crate::workspace_path("testdata/bogie/scene.json"))]
     pub bogie: PathBuf,
     /// A cost model file (`frcd calibrate`); the built-in model otherwise.
-    #[arg(long)]
+    #[arg(long, value_name = "FILE")]
     pub cost: Option<PathBuf>,
     /// Folder for hybrid.md and hybrid.svg.
-    #[arg(long, default_value_os_t = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bench"))]
+    #[arg(long, value_name = "DIR", default_value_os_t = crate::workspace_path("testdata/bench"))]
     pub out: PathBuf,
     /// Check the CPU exact row against the brute-force oracle every K-th frame (0 counts as 1).
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, value_name = "K", default_value_t = 100)]
     pub oracle_every: usize,
 }
 

@@ -145,13 +145,18 @@ impl Bench<'_> {
 #[derive(clap::Args, Debug)]
 pub struct Opts {
     /// Resolutions (pixels across the overlap region's longer side).
-    #[arg(long, value_delimiter = ',', default_values_t = [64, 128, 256, 512, 1024, 2048])]
+    #[arg(
+        long,
+        value_name = "R,..",
+        value_delimiter = ',',
+        default_value = "64,128,256,512,1024,2048"
+    )]
     pub resolutions: Vec<u32>,
     /// Timed runs per point (the median is reported).
-    #[arg(long, default_value_t = 5, value_parser = crate::positive::<usize>)]
+    #[arg(long, value_name = "N", default_value_t = 5, value_parser = crate::positive::<usize>)]
     pub runs: usize,
     /// Folder for image.md and image.svg.
-    #[arg(long, default_value_os_t = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bench"))]
+    #[arg(long, value_name = "DIR", default_value_os_t = crate::workspace_path("testdata/bench"))]
     pub out: PathBuf,
 }
 

@@ -28,13 +28,13 @@ const BURST: usize = 5;
 #[derive(clap::Args, Debug)]
 pub struct Opts {
     /// Triangle pairs per intersection ratio.
-    #[arg(long, default_value_t = 5000, value_parser = crate::positive::<usize>)]
+    #[arg(long, value_name = "N", default_value_t = 5000, value_parser = crate::positive::<usize>)]
     pub pairs: usize,
     /// Repetitions (the median is reported).
-    #[arg(long, default_value_t = 15, value_parser = crate::positive::<usize>)]
+    #[arg(long, value_name = "R", default_value_t = 15, value_parser = crate::positive::<usize>)]
     pub reps: usize,
     /// Folder for tritri.md and tritri.svg.
-    #[arg(long, default_value = "testdata/bench")]
+    #[arg(long, value_name = "DIR", default_value = "testdata/bench")]
     pub out: PathBuf,
 }
 

@@ -63,10 +63,10 @@ fn parse_stats(log: &str) -> Stats {
 #[derive(clap::Args, Debug)]
 pub struct Opts {
     /// Seconds per target.
-    #[arg(long, default_value_t = 60, value_parser = crate::positive::<u64>)]
+    #[arg(long, value_name = "N", default_value_t = 60, value_parser = crate::positive::<u64>)]
     pub seconds: u64,
     /// Targets to run (all when none is named).
-    #[arg(value_parser = clap::builder::PossibleValuesParser::new(TARGETS))]
+    #[arg(value_name = "TARGET", value_parser = clap::builder::PossibleValuesParser::new(TARGETS))]
     pub targets: Vec<String>,
 }
 

@@ -734,7 +734,7 @@ fn check(scene: &Scene) -> Result<Checked> {
 #[derive(clap::Args, Debug)]
 pub struct Opts {
     /// Folder the scene is written to.
-    #[arg(long, default_value_os_t = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bogie"))]
+    #[arg(long, value_name = "DIR", default_value_os_t = crate::workspace_path("testdata/bogie"))]
     pub out: PathBuf,
 }
 

@@ -65,6 +65,13 @@ enum Suite {
     Hybrid(bench_hybrid::Opts),
 }
 
+/// `rel` inside this workspace (the default of the output and input paths, wherever the task
+/// runs from).
+pub fn workspace_path(rel: &str) -> std::path::PathBuf {
+    let xtask = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    xtask.parent().unwrap_or(xtask).join(rel)
+}
+
 /// A count that must be at least 1 (clap value parser: `value_parser = crate::positive::<usize>`).
 pub fn positive<T>(s: &str) -> Result<T, String>
 where

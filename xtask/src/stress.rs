@@ -26,13 +26,13 @@ type Pair = ([DVec3; 3], [DVec3; 3]);
 #[derive(clap::Args, Debug)]
 pub struct Opts {
     /// Pairs per family and variant (as built, rotated).
-    #[arg(long, default_value_t = 400, value_parser = crate::positive::<usize>)]
+    #[arg(long, value_name = "N", default_value_t = 400, value_parser = crate::positive::<usize>)]
     pub pairs: usize,
     /// Seed of the pair generators.
-    #[arg(long, default_value_t = 2024)]
+    #[arg(long, value_name = "S", default_value_t = 2024)]
     pub seed: u64,
     /// Failures printed per method and family.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, value_name = "K", default_value_t = 3)]
     pub show: usize,
 }
 
