@@ -1,6 +1,6 @@
 #![doc = include_str!("../README.md")]
 #![forbid(unsafe_code)]
-//! ## Overview
+//! ## API overview
 //!
 //! The thesis's GPGPU detector on wgpu: each body's OBB tree and triangles are packed into
 //! `rgba32float` textures in the body's local frame and uploaded **once**; a query uploads only the

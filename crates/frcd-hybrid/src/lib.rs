@@ -1,6 +1,6 @@
 #![doc = include_str!("../README.md")]
 #![forbid(unsafe_code)]
-//! ## Overview
+//! ## API overview
 //!
 //! The thesis's hybrid scheduler for many-body interference checking, stage by stage:
 //!

@@ -1,6 +1,6 @@
 #![doc = include_str!("../README.md")]
 #![forbid(unsafe_code)]
-//! ## Overview
+//! ## API overview
 //!
 //! Image-space interference detection of two closed triangle meshes with wgpu: Zou's method (c),
 //! i.e. Knott & Pai's CInDeR ray parity with depth and stencil buffers, inside the

@@ -1,6 +1,6 @@
 #![doc = include_str!("../README.md")]
 #![forbid(unsafe_code)]
-//! ## Overview
+//! ## API overview
 //!
 //! Files in and out of frcd:
 //!

@@ -1,6 +1,6 @@
 #![doc = include_str!("../README.md")]
 #![forbid(unsafe_code)]
-//! ## Overview
+//! ## API overview
 //!
 //! - [`ObbTree::build`]: Gottschalk's OBBTree over a [`frcd_geom::TriMesh`] (fit rule
 //!   selectable, mean-of-centroids split, configurable leaf size, flat depth-first nodes);
