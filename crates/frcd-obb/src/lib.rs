@@ -25,6 +25,7 @@
 
 mod checked;
 pub mod distance;
+mod nodes;
 pub mod oracle;
 mod query;
 mod sat;

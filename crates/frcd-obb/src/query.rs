@@ -315,14 +315,14 @@ impl<'a> Ctx<'a> {
     #[inline]
     fn place(&mut self, j: u32) -> Placed {
         self.counters.placements += 1;
-        Placed::new(&self.b.nodes[j as usize].obb, &self.frame.m, self.frame.t)
+        Placed::new(&self.b.nodes[j as usize], &self.frame.m, self.frame.t)
     }
 
     /// The separating axis and margin of node `i` of A against a placed box of B, if any.
     #[inline]
     fn separation(&mut self, i: u32, pb: &Placed) -> Option<(u8, f64)> {
         self.counters.box_tests += 1;
-        sat::separation(&self.a.nodes[i as usize].obb, pb, self.slack)
+        sat::separation(&self.a.nodes[i as usize], pb, self.slack)
     }
 
     /// The two children of a node pair in the traversal tree (descend into the bigger box; a
@@ -336,12 +336,12 @@ impl<'a> Ctx<'a> {
         } else if na.is_leaf() {
             false
         } else {
-            na.obb.half_extents.length_squared() >= nb.obb.half_extents.length_squared()
+            na.size2() >= nb.size2()
         };
         if split_a {
-            [(i + 1, j), (na.right, j)]
+            [(i + 1, j), (na.right(), j)]
         } else {
-            [(i, j + 1), (i, nb.right)]
+            [(i, j + 1), (i, nb.right())]
         }
     }
 
@@ -366,12 +366,9 @@ impl<'a> Ctx<'a> {
     /// returns `true`.
     #[inline]
     fn leaf_pair(&mut self, i: u32, j: u32, hit: &mut impl FnMut(u32, u32) -> bool) -> bool {
-        let na = self.a.nodes[i as usize];
-        let nb = self.b.nodes[j as usize];
-        for x in na.first..na.first + na.count {
-            let ta = self.a.order[x as usize];
-            for y in nb.first..nb.first + nb.count {
-                let tb = self.b.order[y as usize];
+        let (a, b) = (self.a, self.b);
+        for &ta in a.node_triangles(i) {
+            for &tb in b.node_triangles(j) {
                 if self.tri_pair(ta, tb) && hit(ta, tb) {
                     return true;
                 }

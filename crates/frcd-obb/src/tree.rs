@@ -1,11 +1,15 @@
+use crate::nodes::{self, TNode};
 use frcd_geom::fit::{FitMethod, fit_obb};
 use frcd_geom::{Aabb, DMat3, DVec3, Obb, Sphere, TriMesh, Triangle};
 
-/// One node of an [`ObbTree`], in a flat array in depth-first order.
+/// One node of an [`ObbTree`] as the build produces it, and the f64 view of a stored node
+/// ([`ObbTree::node`]), in depth-first order.
 ///
 /// An internal node's left child is the next node (`index + 1`); its right child is `right`.
 /// A leaf (`count > 0`) holds the triangles `tree.leaf_triangles()[first .. first + count]`
-/// (indices into the input mesh).
+/// (indices into the input mesh). The tree stores its nodes in a compact 64-byte f32 form;
+/// a view's box is an f64 box with orthonormal axes that holds the stored one, hence every
+/// triangle below the node.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Node {
     /// The node's box, in the mesh's local frame.
@@ -63,13 +67,16 @@ impl Default for BuildOptions {
 /// use frcd_obb::{BuildOptions, ObbTree};
 /// let mesh = frcd_geom::shapes::icosphere(1.0, 2);
 /// let tree = ObbTree::build(&mesh, &BuildOptions::default());
-/// assert_eq!(tree.nodes().len(), 2 * mesh.triangle_count() - 1);
+/// assert_eq!(tree.node_count(), 2 * mesh.triangle_count() - 1);
 /// assert_eq!(tree.triangles().len(), mesh.triangle_count());
 /// ```
 #[derive(Clone, Debug)]
 pub struct ObbTree {
-    pub(crate) nodes: Vec<Node>,
+    /// Traversal nodes (depth-first, node 0 the root), 64 bytes each.
+    pub(crate) nodes: Vec<TNode>,
     pub(crate) order: Vec<u32>,
+    /// Bit `k` set when leaf-order entry `k` ends its leaf.
+    pub(crate) ends: Vec<u64>,
     pub(crate) triangles: Vec<Triangle>,
     pub(crate) sphere: Sphere,
     pub(crate) aabb: Aabb,
@@ -137,6 +144,13 @@ impl ObbTree {
             stack.push((mid, hi, index));
             stack.push((lo, mid, u32::MAX));
         }
+        ObbTree::assemble(mesh, &nodes, order, triangles)
+    }
+
+    /// The tree from the build's output: the f64 nodes converted to the compact traversal
+    /// layout (`nodes.rs`), and the whole-mesh volumes.
+    fn assemble(mesh: &TriMesh, nodes: &[Node], order: Vec<u32>, triangles: Vec<Triangle>) -> Self {
+        let (nodes, ends) = nodes::compact(nodes, order.len());
         let points = mesh.vertices();
         let sphere = Sphere::from_points(points);
         let aabb = mesh.aabb();
@@ -144,6 +158,7 @@ impl ObbTree {
         ObbTree {
             nodes,
             order,
+            ends,
             triangles,
             sphere,
             aabb,
@@ -154,9 +169,30 @@ impl ObbTree {
         }
     }
 
-    /// The nodes, depth-first; node 0 is the root.
-    pub fn nodes(&self) -> &[Node] {
-        &self.nodes
+    /// The nodes, depth-first (node 0 is the root), as f64 views ([`ObbTree::node`]); builds
+    /// the list (the tree stores compact f32 nodes).
+    pub fn nodes(&self) -> Vec<Node> {
+        (0..self.nodes.len() as u32).map(|i| self.node(i)).collect()
+    }
+    /// Number of nodes.
+    pub fn node_count(&self) -> usize {
+        self.nodes.len()
+    }
+    /// Node `i` (`i < node_count()`) as an f64 view: links as built, and an f64 box with
+    /// orthonormal axes holding the stored f32 box, hence every triangle below the node.
+    pub fn node(&self, i: u32) -> Node {
+        let n = &self.nodes[i as usize];
+        let (right, first, count) = if n.is_leaf() {
+            (0, n.first(), nodes::leaf_len(&self.ends, n.first()))
+        } else {
+            (n.right(), 0, 0)
+        };
+        Node {
+            obb: n.obb(),
+            right,
+            first,
+            count,
+        }
     }
     /// Mesh triangle indices in leaf order: a leaf holds `order[first .. first + count]`.
     pub fn leaf_triangles(&self) -> &[u32] {
@@ -197,7 +233,7 @@ impl ObbTree {
     /// A node's box in the mesh's local frame, in f64, containing every triangle below it.
     #[allow(dead_code)]
     pub(crate) fn node_obb(&self, node: u32) -> Obb {
-        self.nodes[node as usize].obb
+        self.nodes[node as usize].obb()
     }
     /// The children of an internal node (none for a leaf).
     #[allow(dead_code)]
@@ -206,19 +242,25 @@ impl ObbTree {
         let kids = if n.is_leaf() {
             [0, 0]
         } else {
-            [node + 1, n.right]
+            [node + 1, n.right()]
         };
         kids.into_iter().take(if n.is_leaf() { 0 } else { 2 })
     }
     /// The input-mesh triangle indices of a leaf (empty for an internal node).
     #[allow(dead_code)]
+    #[inline]
     pub(crate) fn node_triangles(&self, node: u32) -> &[u32] {
         let n = &self.nodes[node as usize];
-        &self.order[n.first as usize..(n.first + n.count) as usize]
+        if !n.is_leaf() {
+            return &[];
+        }
+        let first = n.first();
+        let count = nodes::leaf_len(&self.ends, first);
+        &self.order[first as usize..(first + count) as usize]
     }
-    /// Triangle `tri` (input-mesh index) in the mesh's local frame.
-    #[allow(dead_code)]
-    pub(crate) fn triangle(&self, tri: u32) -> Triangle {
+    /// Triangle `tri` (input-mesh index, `< triangle_count()`) in the mesh's local frame.
+    #[inline]
+    pub fn triangle(&self, tri: u32) -> Triangle {
         self.triangles[tri as usize]
     }
 
@@ -234,8 +276,9 @@ impl ObbTree {
     /// ```
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Self>()
-            + self.nodes.capacity() * std::mem::size_of::<Node>()
+            + self.nodes.capacity() * std::mem::size_of::<TNode>()
             + self.order.capacity() * std::mem::size_of::<u32>()
+            + self.ends.capacity() * std::mem::size_of::<u64>()
             + self.triangles.capacity() * std::mem::size_of::<Triangle>()
             + self.component_points.capacity() * std::mem::size_of::<DVec3>()
     }
@@ -249,7 +292,7 @@ impl ObbTree {
             let node = &self.nodes[i as usize];
             if !node.is_leaf() {
                 stack.push((i + 1, d + 1));
-                stack.push((node.right, d + 1));
+                stack.push((node.right(), d + 1));
             }
         }
         best

@@ -97,7 +97,7 @@ fn trees_hold_every_triangle_once_in_depth_first_layout() {
                     for &t in &tree.leaf_triangles()[n.first as usize..(n.first + n.count) as usize]
                     {
                         seen[t as usize] += 1;
-                        for p in tree.triangles()[t as usize].v {
+                        for p in tree.triangle(t).v {
                             assert!(n.obb.contains_point(p), "leaf box misses a vertex");
                         }
                     }
@@ -109,16 +109,16 @@ fn trees_hold_every_triangle_once_in_depth_first_layout() {
             }
             assert_eq!(visited, nodes.len());
             assert!(seen.iter().all(|&c| c == 1));
-            assert_eq!(tree.triangles()[5], mesh.triangle(5));
+            assert_eq!(tree.triangle(5), mesh.triangle(5));
             // Balanced enough for an icosphere.
             assert!(tree.depth() < 40, "depth {}", tree.depth());
             // Internal boxes hold their subtree's vertices.
             for (i, n) in nodes.iter().enumerate().filter(|(_, n)| !n.is_leaf()) {
-                let end = subtree_end(nodes, i);
+                let end = subtree_end(&nodes, i);
                 for m in &nodes[i..end] {
                     if m.is_leaf() {
                         let t = tree.leaf_triangles()[m.first as usize];
-                        for p in tree.triangles()[t as usize].v {
+                        for p in tree.triangle(t).v {
                             assert!(n.obb.contains_point(p));
                         }
                     }
