@@ -1,6 +1,7 @@
 use crate::nodes::{self, TNode};
 use frcd_geom::fit::{FitMethod, fit_obb};
 use frcd_geom::{Aabb, DMat3, DVec3, Obb, Sphere, TriMesh, Triangle};
+use std::sync::Arc;
 
 /// One node of an [`ObbTree`] as the build produces it, and the f64 view of a stored node
 /// ([`ObbTree::node`]), in depth-first order.
@@ -77,7 +78,8 @@ pub struct ObbTree {
     pub(crate) order: Vec<u32>,
     /// Bit `k` set when leaf-order entry `k` ends its leaf.
     pub(crate) ends: Vec<u64>,
-    pub(crate) triangles: Vec<Triangle>,
+    /// The mesh, shared (the tree keeps no copy of its triangles).
+    pub(crate) mesh: Arc<TriMesh>,
     pub(crate) sphere: Sphere,
     pub(crate) aabb: Aabb,
     /// Largest |coordinate| norm of the mesh (local frame), for error bounds.
@@ -99,7 +101,56 @@ impl ObbTree {
     /// tightest there is, whatever the fit rule.
     /// `O(n log n)` for balanced splits; an explicit stack keeps degenerate inputs off the call
     /// stack.
+    ///
+    /// The tree holds the mesh: this clones it once into an [`Arc`]; use
+    /// [`ObbTree::build_shared`] to share a mesh you already hold in an `Arc` without a copy.
     pub fn build(mesh: &TriMesh, options: &BuildOptions) -> ObbTree {
+        Self::build_shared(Arc::new(mesh.clone()), options)
+    }
+
+    /// [`ObbTree::build`] on a shared mesh: the tree keeps this `Arc` (no copy of the mesh) and
+    /// reads triangles through it.
+    ///
+    /// ```
+    /// use std::sync::Arc;
+    /// use frcd_obb::{BuildOptions, ObbTree};
+    /// let mesh = Arc::new(frcd_geom::shapes::icosphere(1.0, 2));
+    /// let tree = ObbTree::build_shared(mesh.clone(), &BuildOptions::default());
+    /// assert!(Arc::ptr_eq(tree.mesh(), &mesh));
+    /// assert_eq!(tree.triangle(7), mesh.triangle(7));
+    /// ```
+    pub fn build_shared(mesh: Arc<TriMesh>, options: &BuildOptions) -> ObbTree {
+        let (nodes, order) = build_nodes(&mesh, options);
+        ObbTree::assemble(mesh, &nodes, order)
+    }
+
+    /// The tree from the build's output: the f64 nodes converted to the compact traversal
+    /// layout (`nodes.rs`), and the whole-mesh volumes.
+    fn assemble(mesh: Arc<TriMesh>, nodes: &[Node], order: Vec<u32>) -> Self {
+        let (nodes, ends) = nodes::compact(nodes, order.len());
+        let points = mesh.vertices();
+        let sphere = Sphere::from_points(points);
+        let aabb = mesh.aabb();
+        let radius_from_origin = aabb.min.abs().max(aabb.max.abs()).length();
+        ObbTree {
+            nodes,
+            order,
+            ends,
+            sphere,
+            aabb,
+            radius_from_origin,
+            component_points: component_points(&mesh),
+            closed: mesh.topology().is_closed(),
+            uid: NEXT_UID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
+            mesh,
+        }
+    }
+}
+
+/// The build proper: depth-first f64 nodes (node 0 the root) and the leaf order of the mesh's
+/// triangles.
+fn build_nodes(mesh: &TriMesh, options: &BuildOptions) -> (Vec<Node>, Vec<u32>) {
+    {
         let triangles: Vec<Triangle> = mesh.triangles().collect();
         let n = triangles.len();
         let leaf = options.max_leaf_triangles.max(1) as usize;
@@ -144,31 +195,11 @@ impl ObbTree {
             stack.push((mid, hi, index));
             stack.push((lo, mid, u32::MAX));
         }
-        ObbTree::assemble(mesh, &nodes, order, triangles)
+        (nodes, order)
     }
+}
 
-    /// The tree from the build's output: the f64 nodes converted to the compact traversal
-    /// layout (`nodes.rs`), and the whole-mesh volumes.
-    fn assemble(mesh: &TriMesh, nodes: &[Node], order: Vec<u32>, triangles: Vec<Triangle>) -> Self {
-        let (nodes, ends) = nodes::compact(nodes, order.len());
-        let points = mesh.vertices();
-        let sphere = Sphere::from_points(points);
-        let aabb = mesh.aabb();
-        let radius_from_origin = aabb.min.abs().max(aabb.max.abs()).length();
-        ObbTree {
-            nodes,
-            order,
-            ends,
-            triangles,
-            sphere,
-            aabb,
-            radius_from_origin,
-            component_points: component_points(mesh),
-            closed: mesh.topology().is_closed(),
-            uid: NEXT_UID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
-        }
-    }
-
+impl ObbTree {
     /// The nodes, depth-first (node 0 is the root), as f64 views ([`ObbTree::node`]); builds
     /// the list (the tree stores compact f32 nodes).
     pub fn nodes(&self) -> Vec<Node> {
@@ -198,9 +229,18 @@ impl ObbTree {
     pub fn leaf_triangles(&self) -> &[u32] {
         &self.order
     }
-    /// The mesh's triangles (local frame), indexed as in the input mesh.
-    pub fn triangles(&self) -> &[Triangle] {
-        &self.triangles
+    /// The mesh's triangles (local frame), indexed as in the input mesh, read through the mesh
+    /// (the tree keeps no copy): use [`ObbTree::triangle`] for one.
+    pub fn triangles(&self) -> impl ExactSizeIterator<Item = Triangle> + '_ {
+        self.mesh.triangles()
+    }
+    /// Number of triangles of the mesh.
+    pub fn triangle_count(&self) -> usize {
+        self.mesh.triangle_count()
+    }
+    /// The mesh the tree was built over (shared, not copied).
+    pub fn mesh(&self) -> &Arc<TriMesh> {
+        &self.mesh
     }
     /// Bounding sphere of the whole mesh (local frame), part of the hybrid top volume.
     pub fn bounding_sphere(&self) -> Sphere {
@@ -261,25 +301,28 @@ impl ObbTree {
     /// Triangle `tri` (input-mesh index, `< triangle_count()`) in the mesh's local frame.
     #[inline]
     pub fn triangle(&self, tri: u32) -> Triangle {
-        self.triangles[tri as usize]
+        self.mesh.triangle(tri as usize)
     }
 
-    /// Heap and inline bytes held by the tree (nodes, triangle copies, leaf order, component
-    /// points), not counting the mesh it was built from: divide by the triangle count for the
-    /// per-triangle cost reported in the crate README.
+    /// Heap and inline bytes held by the tree itself (nodes, leaf order and its end bits,
+    /// component points), not counting the mesh, which it shares through an `Arc` (count it
+    /// once with [`TriMesh::memory_bytes`] however many trees share it; [`ObbTree::build`]
+    /// gives the tree its own copy, [`ObbTree::build_shared`] none). Mesh plus tree, divided by
+    /// the triangle count, is the per-triangle cost reported in the crate README.
     ///
     /// ```
+    /// use std::sync::Arc;
     /// use frcd_obb::{BuildOptions, ObbTree};
-    /// let mesh = frcd_geom::shapes::icosphere(1.0, 3);
-    /// let tree = ObbTree::build(&mesh, &BuildOptions::default());
-    /// assert!(tree.memory_bytes() > 72 * mesh.triangle_count());
+    /// let mesh = Arc::new(frcd_geom::shapes::icosphere(1.0, 3));
+    /// let tree = ObbTree::build_shared(mesh.clone(), &BuildOptions::default());
+    /// let per_triangle = (mesh.memory_bytes() + tree.memory_bytes()) / mesh.triangle_count();
+    /// assert!(per_triangle > 64 && per_triangle < 200, "{per_triangle}");
     /// ```
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Self>()
             + self.nodes.capacity() * std::mem::size_of::<TNode>()
             + self.order.capacity() * std::mem::size_of::<u32>()
             + self.ends.capacity() * std::mem::size_of::<u64>()
-            + self.triangles.capacity() * std::mem::size_of::<Triangle>()
             + self.component_points.capacity() * std::mem::size_of::<DVec3>()
     }
 
