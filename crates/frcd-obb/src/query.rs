@@ -509,8 +509,13 @@ pub(crate) fn contained(
             .triangles()
             .fold(Aabb::EMPTY, |acc, t| acc.union(&frame.triangle(&t).aabb()));
         for &p in &a.component_points {
-            if point_inside(p, n, |i| frame.triangle(&b.triangle(i as u32)), &bounds, seed)
-                == Some(true)
+            if point_inside(
+                p,
+                n,
+                |i| frame.triangle(&b.triangle(i as u32)),
+                &bounds,
+                seed,
+            ) == Some(true)
             {
                 return Some(Containment::AInsideB);
             }

@@ -254,10 +254,23 @@ fn coherent_front_does_less_work() {
     // (apart, but inside every top volume and root box, so proving it takes a traversal).
     let a = shapes::torus(1.0, 0.3, 48, 16).unwrap();
     let b = shapes::icosphere(0.5, 3);
-    let (ta, tb) = (
-        ObbTree::build(&a, &BuildOptions::default()),
-        ObbTree::build(&b, &BuildOptions::default()),
-    );
+    // Leaf 1: at least 3x less work. Leaf 2 (the default): the front saves the same box work,
+    // but every touching leaf pair's four triangle tests are re-run each query (they must be,
+    // for all pairs), so touching all-pairs work drops 2.5x here (measured); at least 2x.
+    for (leaf, factor) in [(1, 3), (2, 2)] {
+        let options = BuildOptions {
+            max_leaf_triangles: leaf,
+            ..BuildOptions::default()
+        };
+        coherent_front_case(
+            &ObbTree::build(&a, &options),
+            &ObbTree::build(&b, &options),
+            factor,
+        );
+    }
+}
+
+fn coherent_front_case(ta: &ObbTree, tb: &ObbTree, factor: u64) {
     for (start, label) in [
         (DVec3::new(1.0, 0.0, 0.6), "touching"),
         (DVec3::ZERO, "apart"),
@@ -284,7 +297,7 @@ fn coherent_front_does_less_work() {
             let (plain, cached, cache) = work_of(&ta, &tb, &poses, &req);
             eprintln!("{label} {mode:?}: work plain {plain}, cached {cached}");
             assert!(
-                3 * cached <= plain,
+                factor * cached <= plain,
                 "{label} {mode:?}: cached work {cached} vs plain {plain}"
             );
             if mode == Mode::AllPairs {
