@@ -128,7 +128,7 @@ fn up(x: f64) -> f32 {
 }
 
 /// Largest `|G_ij − δ_ij|` of the Gram matrix of three axes.
-fn gram_deviation(u: &[DVec3; 3]) -> f64 {
+pub(crate) fn gram_deviation(u: &[DVec3; 3]) -> f64 {
     let mut worst: f64 = 0.0;
     for i in 0..3 {
         for j in 0..3 {

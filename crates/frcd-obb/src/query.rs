@@ -39,6 +39,7 @@ pub struct Request {
     /// Also compute the intersection segment of every reported pair.
     pub segments: bool,
     /// Triangle-triangle test. Only [`Method::Exact`] makes the answer equal the oracle's.
+    #[cfg_attr(feature = "serde", serde(with = "method_serde"))]
     pub method: Method,
     /// Treat closed meshes as solids: when no surface pair touches, report one mesh lying inside
     /// the other (a point-in-mesh parity test on exact predicates). A mesh that is not closed
@@ -46,6 +47,23 @@ pub struct Request {
     pub solid: bool,
     /// Bounding volumes tested before the root OBB pair.
     pub top_volume: TopVolume,
+}
+
+/// `Method` (frcd-tritri has no serde feature) as its `Debug` name.
+#[cfg(feature = "serde")]
+mod method_serde {
+    use frcd_tritri::Method;
+    pub fn serialize<S: serde::Serializer>(m: &Method, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&format!("{m:?}"))
+    }
+    pub fn deserialize<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Method, D::Error> {
+        let name = <String as serde::Deserialize>::deserialize(d)?;
+        Method::ALL
+            .iter()
+            .copied()
+            .find(|m| format!("{m:?}") == name)
+            .ok_or_else(|| serde::de::Error::custom(format!("unknown triangle test {name:?}")))
+    }
 }
 
 /// Which body lies inside which (solid mode, no touching surface pair).

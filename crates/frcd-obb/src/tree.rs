@@ -129,6 +129,16 @@ impl ObbTree {
     /// layout (`nodes.rs`), and the whole-mesh volumes.
     fn assemble(mesh: Arc<TriMesh>, nodes: &[Node], order: Vec<u32>) -> Self {
         let (nodes, ends) = nodes::compact(nodes, order.len());
+        Self::from_compact(mesh, nodes, order, ends)
+    }
+
+    /// The tree from compact nodes, the leaf order and its end bits (checked by the caller).
+    pub(crate) fn from_compact(
+        mesh: Arc<TriMesh>,
+        nodes: Vec<TNode>,
+        order: Vec<u32>,
+        ends: Vec<u64>,
+    ) -> Self {
         let points = mesh.vertices();
         let sphere = Sphere::from_points(points);
         let aabb = mesh.aabb();
