@@ -287,14 +287,14 @@ fn coherent_front_case(ta: &ObbTree, tb: &ObbTree, factor: u64) {
                 )
             })
             .collect();
-        let touching = collide(&ta, &poses[0].0, &tb, &poses[0].1, &Request::default()).collide;
+        let touching = collide(ta, &poses[0].0, tb, &poses[0].1, &Request::default()).collide;
         assert_eq!(touching, label == "touching");
         for mode in [Mode::FirstContact, Mode::AllPairs] {
             let req = Request {
                 mode,
                 ..Request::default()
             };
-            let (plain, cached, cache) = work_of(&ta, &tb, &poses, &req);
+            let (plain, cached, cache) = work_of(ta, tb, &poses, &req);
             eprintln!("{label} {mode:?}: work plain {plain}, cached {cached}");
             assert!(
                 factor * cached <= plain,
