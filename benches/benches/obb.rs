@@ -121,8 +121,21 @@ struct Pair {
 }
 
 fn prepare(scene: Scene, opts: &BuildOptions) -> Pair {
-    let tree = |i: usize| Arc::new(ObbTree::build(&scene.bodies[i].mesh, opts));
+    // The trees share the scene's meshes (no copy), so mesh + tree is what a user holds.
+    let tree = |i: usize| Arc::new(ObbTree::build_shared(scene.bodies[i].mesh.clone(), opts));
     let frcd = [tree(0), tree(1)];
+    for t in &frcd {
+        let n = t.triangle_count() as f64;
+        eprintln!(
+            "[memory] {}: {} triangles, leaf {}: mesh {:.1} + tree {:.1} = {:.1} B per triangle",
+            scene.name,
+            t.triangle_count(),
+            opts.max_leaf_triangles,
+            t.mesh().memory_bytes() as f64 / n,
+            t.memory_bytes() as f64 / n,
+            (t.mesh().memory_bytes() + t.memory_bytes()) as f64 / n,
+        );
+    }
     let m64 = [
         p64::mesh(&scene.bodies[0].mesh),
         p64::mesh(&scene.bodies[1].mesh),
@@ -143,7 +156,26 @@ fn prepare(scene: Scene, opts: &BuildOptions) -> Pair {
 fn req(mode: Mode) -> Request {
     Request {
         mode,
+        method: bench_method(),
         ..Request::default()
+    }
+}
+
+/// The triangle test: exact unless `FRCD_BENCH_METHOD` names a float method (`tropp`,
+/// `moller`, ...) to compare Exact with it inside the tree (the oracle check is skipped then).
+fn bench_method() -> frcd_obb::Method {
+    use frcd_obb::Method;
+    match std::env::var("FRCD_BENCH_METHOD")
+        .unwrap_or_default()
+        .to_ascii_lowercase()
+        .as_str()
+    {
+        "tropp" => Method::Tropp,
+        "moller" => Method::Moller,
+        "guigue_devillers" => Method::GuigueDevillers,
+        "shen" => Method::Shen,
+        "zou" => Method::Zou,
+        _ => Method::Exact,
     }
 }
 
@@ -463,7 +495,11 @@ fn bench_pairs(c: &mut Criterion) {
     for (scene, stride) in list {
         let name = scene.name.clone();
         let p = prepare(scene, &opts);
-        agreement(&p, stride);
+        if bench_method() == frcd_obb::Method::Exact {
+            agreement(&p, stride);
+        } else {
+            eprintln!("[method] {:?}: oracle check skipped", bench_method());
+        }
         split(&p);
         pair_group(c, &name, &p);
     }

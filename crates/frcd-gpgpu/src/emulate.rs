@@ -562,7 +562,7 @@ mod tests {
         let mut out = vec![Vec::new(); tree.triangles().len()];
         let mut stack = vec![(0usize, vec![0usize])];
         while let Some((i, path)) = stack.pop() {
-            let n = &tree.nodes()[i];
+            let n = &tree.node(i as u32);
             if n.is_leaf() {
                 for &t in &tree.leaf_triangles()[n.first as usize..(n.first + n.count) as usize] {
                     out[t as usize] = path.clone();
@@ -579,7 +579,7 @@ mod tests {
     }
 
     fn node_f(tree: &ObbTree, i: usize) -> NodeF {
-        let b = obb_to_f32(&tree.nodes()[i].obb, i).unwrap();
+        let b = obb_to_f32(&tree.node(i as u32).obb, i).unwrap();
         let c = |x: [f32; 3]| v3(x[0], x[1], x[2]);
         NodeF {
             c: c(b.center),
@@ -645,11 +645,7 @@ mod tests {
                     );
                 }
                 for &(i, j) in &pairs {
-                    let r = tri_tri(
-                        &pose,
-                        tri_f(&ta.triangles()[i as usize]),
-                        tri_f(&tb.triangles()[j as usize]),
-                    );
+                    let r = tri_tri(&pose, tri_f(&ta.triangle(i)), tri_f(&tb.triangle(j)));
                     assert_ne!(r, TRI_DISJOINT, "{env:?}: pair ({i}, {j}) lost");
                 }
             }

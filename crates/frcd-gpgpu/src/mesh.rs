@@ -380,7 +380,7 @@ impl GpuContext {
             node_base: node_base as u32,
             tri_base: tri_base as u32,
             depth,
-            triangles: tree.triangles().into(),
+            triangles: tree.triangles().collect(),
             bytes,
         })
     }

@@ -284,13 +284,13 @@ fn depth_of(tree: &ObbTree) -> u32 {
 /// The structure the shaders trust: a non-empty tree, node and triangle counts whose indices
 /// are exact in f32, and one leaf-order entry per triangle.
 fn check_tree(tree: &ObbTree) -> Result<(), GpuError> {
-    let (nodes, order, tris) = (tree.nodes(), tree.leaf_triangles(), tree.triangles());
-    if nodes.is_empty() || tris.is_empty() {
+    let (nodes, order, n_tris) = (tree.nodes(), tree.leaf_triangles(), tree.triangle_count());
+    if nodes.is_empty() || n_tris == 0 {
         return Err(GpuError::InvalidInput("empty tree".into()));
     }
     for (what, n) in [
         ("node count (f32-exact indices)", nodes.len()),
-        ("triangle count (f32-exact indices)", tris.len()),
+        ("triangle count (f32-exact indices)", n_tris),
     ] {
         if n as u64 >= MAX_ITEMS {
             return Err(GpuError::MeshTooLarge {
@@ -300,11 +300,11 @@ fn check_tree(tree: &ObbTree) -> Result<(), GpuError> {
             });
         }
     }
-    if order.len() != tris.len() {
+    if order.len() != n_tris {
         return Err(GpuError::InvalidInput(format!(
             "leaf order has {} entries for {} triangles",
             order.len(),
-            tris.len()
+            n_tris
         )));
     }
     Ok(())
@@ -313,7 +313,7 @@ fn check_tree(tree: &ObbTree) -> Result<(), GpuError> {
 /// Checks the tree's structure (the shaders trust it) and packs it.
 pub fn pack_tree(tree: &ObbTree, limits: &TexLimits) -> Result<PackedTree, GpuError> {
     let nodes = tree.nodes();
-    let tris = tree.triangles();
+    let n_tris = tree.triangle_count();
     check_tree(tree)?;
     let node_layout = TexLayout::new(
         nodes.len(),
@@ -323,7 +323,7 @@ pub fn pack_tree(tree: &ObbTree, limits: &TexLimits) -> Result<PackedTree, GpuEr
         limits.max_layers,
     )?;
     let tri_layout = TexLayout::new(
-        tris.len(),
+        n_tris,
         TRI_TEXELS,
         limits.max_width,
         limits.max_rows,
@@ -346,7 +346,7 @@ pub fn pack_tree_rows(
         layers: 1,
     };
     let node_layout = rows(tree.nodes().len(), node_items_per_row, NODE_TEXELS);
-    let tri_layout = rows(tree.triangles().len(), tri_items_per_row, TRI_TEXELS);
+    let tri_layout = rows(tree.triangle_count(), tri_items_per_row, TRI_TEXELS);
     pack_into(tree, node_layout, tri_layout)
 }
 
@@ -357,7 +357,6 @@ fn pack_into(
 ) -> Result<PackedTree, GpuError> {
     let nodes = tree.nodes();
     let order = tree.leaf_triangles();
-    let tris = tree.triangles();
     check_tree(tree)?;
     let mut node_texels = vec![[0f32; 4]; node_layout.texel_count()];
     for (i, n) in nodes.iter().enumerate() {
@@ -385,9 +384,11 @@ fn pack_into(
     }
     let mut tri_texels = vec![[0f32; 4]; tri_layout.texel_count()];
     for (slot, &index) in order.iter().enumerate() {
-        let tri = tris.get(index as usize).ok_or_else(|| {
-            GpuError::InvalidInput(format!("leaf order names triangle {index}, out of range"))
-        })?;
+        let tri = ((index as usize) < tree.triangle_count())
+            .then(|| tree.triangle(index))
+            .ok_or_else(|| {
+                GpuError::InvalidInput(format!("leaf order names triangle {index}, out of range"))
+            })?;
         if !tri.is_finite() {
             return Err(GpuError::InvalidInput(format!(
                 "triangle {index} has a non-finite coordinate"
@@ -480,7 +481,7 @@ mod tests {
     }
 
     fn subtree_triangles(tree: &ObbTree, i: usize, out: &mut Vec<u32>) {
-        let n = &tree.nodes()[i];
+        let n = &tree.node(i as u32);
         if n.is_leaf() {
             out.extend_from_slice(
                 &tree.leaf_triangles()[n.first as usize..(n.first + n.count) as usize],
@@ -505,7 +506,7 @@ mod tests {
             let mut tris = Vec::new();
             subtree_triangles(&tree, i, &mut tris);
             for t in tris {
-                for p in tree.triangles()[t as usize].v {
+                for p in tree.triangle(t).v {
                     assert!(inside(&b, p), "node {i} misses {p:?}");
                 }
             }
@@ -532,7 +533,7 @@ mod tests {
         for (slot, &index) in tree.leaf_triangles().iter().enumerate() {
             let t0 = p.tris[p.tri_layout.linear(slot as u32, 0)];
             assert_eq!(t0[3] as u32, index);
-            let v = tree.triangles()[index as usize].v[0];
+            let v = tree.triangle(index).v[0];
             assert_eq!(t0[0], v.x as f32);
         }
         assert!(p.depth >= 7, "{}", p.depth);

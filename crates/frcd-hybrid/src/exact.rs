@@ -69,8 +69,8 @@ impl Checker {
                 }
             }
             Plan::Acs(sa, sb) => {
-                let tri_a: Vec<Triangle> = sa.iter().map(|&i| ta.triangles()[i as usize]).collect();
-                let tri_b: Vec<Triangle> = sb.iter().map(|&i| tb.triangles()[i as usize]).collect();
+                let tri_a: Vec<Triangle> = sa.iter().map(|&i| ta.triangle(i)).collect();
+                let tri_b: Vec<Triangle> = sb.iter().map(|&i| tb.triangle(i)).collect();
                 let mut pairs: Vec<(u32, u32)> =
                     frcd_obb::oracle::pairs_of_triangles(&tri_a, pa, &tri_b, pb)
                         .into_iter()
@@ -152,10 +152,7 @@ impl Checker {
         pairs
             .iter()
             .map(|&(x, y)| {
-                frcd_tritri::intersection_segment(
-                    &ta.triangles()[x as usize],
-                    &frame.triangle(&tb.triangles()[y as usize]),
-                )
+                frcd_tritri::intersection_segment(&ta.triangle(x), &frame.triangle(&tb.triangle(y)))
             })
             .collect()
     }

@@ -117,10 +117,17 @@ fn main() {
         let build = t0.elapsed().as_secs_f64() * 1e3;
         println!(
             "leaf {leaf}: build {build:.1} ms, {} nodes",
-            tree.nodes().len()
+            tree.node_count()
         );
         for mode in [Mode::FirstContact, Mode::AllPairs] {
+            // METHOD=tropp (or moller) compares a float triangle test with Exact in the tree.
+            let method = match std::env::var("METHOD").as_deref() {
+                Ok("tropp") => frcd_obb::Method::Tropp,
+                Ok("moller") => frcd_obb::Method::Moller,
+                _ => frcd_obb::Method::Exact,
+            };
             let r = Request {
+                method,
                 mode,
                 ..Request::default()
             };

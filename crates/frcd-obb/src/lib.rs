@@ -23,9 +23,12 @@
 
 mod checked;
 pub mod distance;
+mod nodes;
 pub mod oracle;
 mod query;
 mod sat;
+#[cfg(feature = "serde")]
+mod saved;
 mod solid;
 mod tree;
 mod world;
@@ -37,6 +40,8 @@ pub use query::{
     Collision, Containment, Counters, Mode, PairCache, RelativeFrame, Request, TopVolume, collide,
     collide_cached,
 };
+#[cfg(feature = "serde")]
+pub use saved::{LoadError, SavedTree};
 pub use tree::{BuildOptions, Node, ObbTree};
 pub use world::{
     BodyContact, BodyId, Clearance, StepReport, World, WorldError, WorldOptions, pair_clearance,

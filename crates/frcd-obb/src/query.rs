@@ -39,6 +39,7 @@ pub struct Request {
     /// Also compute the intersection segment of every reported pair.
     pub segments: bool,
     /// Triangle-triangle test. Only [`Method::Exact`] makes the answer equal the oracle's.
+    #[cfg_attr(feature = "serde", serde(with = "method_serde"))]
     pub method: Method,
     /// Treat closed meshes as solids: when no surface pair touches, report one mesh lying inside
     /// the other (a point-in-mesh parity test on exact predicates). A mesh that is not closed
@@ -46,6 +47,23 @@ pub struct Request {
     pub solid: bool,
     /// Bounding volumes tested before the root OBB pair.
     pub top_volume: TopVolume,
+}
+
+/// `Method` (frcd-tritri has no serde feature) as its `Debug` name.
+#[cfg(feature = "serde")]
+mod method_serde {
+    use frcd_tritri::Method;
+    pub fn serialize<S: serde::Serializer>(m: &Method, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&format!("{m:?}"))
+    }
+    pub fn deserialize<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Method, D::Error> {
+        let name = <String as serde::Deserialize>::deserialize(d)?;
+        Method::ALL
+            .iter()
+            .copied()
+            .find(|m| format!("{m:?}") == name)
+            .ok_or_else(|| serde::de::Error::custom(format!("unknown triangle test {name:?}")))
+    }
 }
 
 /// Which body lies inside which (solid mode, no touching surface pair).
@@ -273,6 +291,22 @@ impl PairCache {
     }
 }
 
+/// The traversal stack: node pairs, each naming its B box (placed in A's frame) in `placed`.
+#[derive(Default)]
+struct Stack {
+    pairs: Vec<(u32, u32, u32)>,
+    placed: Vec<Placed>,
+}
+
+impl Stack {
+    fn new() -> Self {
+        Stack {
+            pairs: Vec::with_capacity(64),
+            placed: Vec::with_capacity(64),
+        }
+    }
+}
+
 struct Ctx<'a> {
     a: &'a ObbTree,
     b: &'a ObbTree,
@@ -315,14 +349,14 @@ impl<'a> Ctx<'a> {
     #[inline]
     fn place(&mut self, j: u32) -> Placed {
         self.counters.placements += 1;
-        Placed::new(&self.b.nodes[j as usize].obb, &self.frame.m, self.frame.t)
+        Placed::new(&self.b.nodes[j as usize], &self.frame.m, self.frame.t)
     }
 
     /// The separating axis and margin of node `i` of A against a placed box of B, if any.
     #[inline]
     fn separation(&mut self, i: u32, pb: &Placed) -> Option<(u8, f64)> {
         self.counters.box_tests += 1;
-        sat::separation(&self.a.nodes[i as usize].obb, pb, self.slack)
+        sat::separation(&self.a.nodes[i as usize], pb, self.slack)
     }
 
     /// The two children of a node pair in the traversal tree (descend into the bigger box; a
@@ -336,12 +370,12 @@ impl<'a> Ctx<'a> {
         } else if na.is_leaf() {
             false
         } else {
-            na.obb.half_extents.length_squared() >= nb.obb.half_extents.length_squared()
+            na.size2() >= nb.size2()
         };
         if split_a {
-            [(i + 1, j), (na.right, j)]
+            [(i + 1, j), (na.right(), j)]
         } else {
-            [(i, j + 1), (i, nb.right)]
+            [(i, j + 1), (i, nb.right())]
         }
     }
 
@@ -353,8 +387,8 @@ impl<'a> Ctx<'a> {
     /// Exact per-pair box check, then the triangle test.
     #[inline]
     fn tri_pair(&mut self, ta: u32, tb: u32) -> bool {
-        let t1 = &self.a.triangles[ta as usize];
-        let t2 = self.frame.triangle(&self.b.triangles[tb as usize]);
+        let t1 = &self.a.triangle(ta);
+        let t2 = self.frame.triangle(&self.b.triangle(tb));
         if !t1.aabb().intersects(&t2.aabb()) {
             return false;
         }
@@ -366,12 +400,9 @@ impl<'a> Ctx<'a> {
     /// returns `true`.
     #[inline]
     fn leaf_pair(&mut self, i: u32, j: u32, hit: &mut impl FnMut(u32, u32) -> bool) -> bool {
-        let na = self.a.nodes[i as usize];
-        let nb = self.b.nodes[j as usize];
-        for x in na.first..na.first + na.count {
-            let ta = self.a.order[x as usize];
-            for y in nb.first..nb.first + nb.count {
-                let tb = self.b.order[y as usize];
+        let (a, b) = (self.a, self.b);
+        for &ta in a.node_triangles(i) {
+            for &tb in b.node_triangles(j) {
                 if self.tri_pair(ta, tb) && hit(ta, tb) {
                     return true;
                 }
@@ -389,17 +420,23 @@ impl<'a> Ctx<'a> {
         &mut self,
         i: u32,
         j: u32,
-        stack: &mut Vec<(u32, u32, Placed)>,
+        stack: &mut Stack,
         mut front: Option<(&mut Vec<FrontEntry>, f64)>,
         hit: &mut impl FnMut(u32, u32) -> bool,
     ) -> bool {
-        let base = stack.len();
-        // B's boxes travel with the stack mapped into A's frame: splitting A reuses them.
+        let base = stack.pairs.len();
+        let pbase = stack.placed.len();
+        // B's boxes mapped into A's frame live in `stack.placed`; stack entries name them by
+        // index (12-byte entries instead of copying a 128-byte box on every push and pop), and
+        // splitting A reuses them. Indices never decrease up the stack, so when an entry is
+        // popped every box above its own belongs to finished subtrees and is dropped.
         let pj = self.place(j);
-        stack.push((i, j, pj));
-        while stack.len() > base {
-            let (i, j, pj) = stack.pop().expect("non-empty");
-            if let Some((_, margin)) = self.separation(i, &pj) {
+        stack.placed.push(pj);
+        stack.pairs.push((i, j, pbase as u32));
+        while stack.pairs.len() > base {
+            let (i, j, p) = stack.pairs.pop().expect("non-empty");
+            stack.placed.truncate(p as usize + 1);
+            if let Some((_, margin)) = self.separation(i, &stack.placed[p as usize]) {
                 if let Some((f, clock)) = &mut front {
                     f.push(FrontEntry {
                         a: i,
@@ -421,29 +458,34 @@ impl<'a> Ctx<'a> {
                 }
                 if self.leaf_pair(i, j, hit) {
                     if let Some((f, _)) = &mut front {
-                        f.extend(stack[base..].iter().map(|&(a, b, _)| FrontEntry {
+                        f.extend(stack.pairs[base..].iter().map(|&(a, b, _)| FrontEntry {
                             a,
                             b,
                             kind: UNTESTED,
                             bound: f64::NEG_INFINITY,
                         }));
                     }
-                    stack.truncate(base);
+                    stack.pairs.truncate(base);
+                    stack.placed.truncate(pbase);
                     return true;
                 }
                 continue;
             }
             let [l, r] = self.children(i, j);
             if l.1 == j {
-                stack.push((r.0, r.1, pj));
-                stack.push((l.0, l.1, pj));
+                stack.pairs.push((r.0, r.1, p));
+                stack.pairs.push((l.0, l.1, p));
             } else {
+                let q = stack.placed.len() as u32;
                 let pr = self.place(r.1);
-                stack.push((r.0, r.1, pr));
                 let pl = self.place(l.1);
-                stack.push((l.0, l.1, pl));
+                stack.placed.push(pr);
+                stack.placed.push(pl);
+                stack.pairs.push((r.0, r.1, q));
+                stack.pairs.push((l.0, l.1, q + 1));
             }
         }
+        stack.placed.truncate(pbase);
         false
     }
 
@@ -465,10 +507,10 @@ pub(crate) fn contained(
 ) -> Option<Containment> {
     if a.closed {
         let bounds = a.aabb;
-        let tris = &a.triangles;
+        let n = a.triangle_count();
         for &p in &b.component_points {
             let p = frame.point(p);
-            if point_inside(p, tris.len(), |i| tris[i], &bounds, seed) == Some(true) {
+            if point_inside(p, n, |i| a.triangle(i as u32), &bounds, seed) == Some(true) {
                 return Some(Containment::BInsideA);
             }
         }
@@ -479,14 +521,19 @@ pub(crate) fn contained(
         if !a.component_points.iter().any(|p| rough.contains_point(*p)) {
             return None;
         }
-        let tris = &b.triangles;
+        let n = b.triangle_count();
         // The bounds must hold the mapped triangles exactly: build them from the mapped triangles.
-        let bounds = tris
-            .iter()
-            .fold(Aabb::EMPTY, |acc, t| acc.union(&frame.triangle(t).aabb()));
+        let bounds = b
+            .triangles()
+            .fold(Aabb::EMPTY, |acc, t| acc.union(&frame.triangle(&t).aabb()));
         for &p in &a.component_points {
-            if point_inside(p, tris.len(), |i| frame.triangle(&tris[i]), &bounds, seed)
-                == Some(true)
+            if point_inside(
+                p,
+                n,
+                |i| frame.triangle(&b.triangle(i as u32)),
+                &bounds,
+                seed,
+            ) == Some(true)
             {
                 return Some(Containment::AInsideB);
             }
@@ -514,8 +561,8 @@ fn finish(ctx: &Ctx<'_>, request: &Request, mut c: Collision) -> Collision {
             .iter()
             .map(|&(ta, tb)| {
                 frcd_tritri::intersection_segment(
-                    &ctx.a.triangles[ta as usize],
-                    &ctx.frame.triangle(&ctx.b.triangles[tb as usize]),
+                    &ctx.a.triangle(ta),
+                    &ctx.frame.triangle(&ctx.b.triangle(tb)),
                 )
             })
             .collect();
@@ -555,7 +602,7 @@ pub fn collide(
         c.counters = ctx.counters;
         return c;
     }
-    let mut stack = Vec::with_capacity(64);
+    let mut stack = Stack::new();
     match request.mode {
         Mode::FirstContact => {
             let mut w = None;
@@ -657,7 +704,7 @@ pub fn collide_cached(
         let mut front = std::mem::take(&mut cache.front);
         front.clear();
         let before = ctx.counters.work();
-        let mut stack = Vec::with_capacity(64);
+        let mut stack = Stack::new();
         let mut hit = hit_fn(first, &mut found, &mut c.pairs);
         ctx.descend(
             0,
@@ -717,7 +764,7 @@ fn walk_front(
     hit: &mut impl FnMut(u32, u32) -> bool,
 ) -> bool {
     let start = ctx.counters.work();
-    let mut stack = Vec::with_capacity(64);
+    let mut stack = Stack::new();
     let limit = clock + ctx.slack;
     let passes: &[Option<u8>] = if first {
         &[Some(OVERLAP), None]

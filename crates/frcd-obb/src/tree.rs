@@ -1,11 +1,16 @@
+use crate::nodes::{self, TNode};
 use frcd_geom::fit::{FitMethod, fit_obb};
 use frcd_geom::{Aabb, DMat3, DVec3, Obb, Sphere, TriMesh, Triangle};
+use std::sync::Arc;
 
-/// One node of an [`ObbTree`], in a flat array in depth-first order.
+/// One node of an [`ObbTree`] as the build produces it, and the f64 view of a stored node
+/// ([`ObbTree::node`]), in depth-first order.
 ///
 /// An internal node's left child is the next node (`index + 1`); its right child is `right`.
 /// A leaf (`count > 0`) holds the triangles `tree.leaf_triangles()[first .. first + count]`
-/// (indices into the input mesh).
+/// (indices into the input mesh). The tree stores its nodes in a compact 64-byte f32 form;
+/// a view's box is an f64 box with orthonormal axes that holds the stored one, hence every
+/// triangle below the node.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Node {
     /// The node's box, in the mesh's local frame.
@@ -41,10 +46,11 @@ pub struct BuildOptions {
     /// `obb/build`; see the crate README).
     pub fit: FitMethod,
     /// Most triangles in a leaf (a node with at most this many triangles becomes a leaf).
-    /// `0` is treated as `1`. The default, 1, was measured against 2 and 4 on every bench class
-    /// (`FRCD_BENCH_LEAF`, see the crate README): 1 was fastest or within noise on the dense
-    /// sweep and the real CAD pairs (leaf 4 was 1.6-2.5× slower on the wagon/bogie pairs), 2
-    /// about 25 % faster on the near-contact knots; larger leaves save memory and build time.
+    /// `0` is treated as `1`. The default, 2, was measured against 1 on every bench class with
+    /// the 64-byte f32 nodes (`FRCD_BENCH_LEAF`, see the crate README): leaf 2 was faster on the
+    /// dense sweep (all pairs 14 %), the knots and the fandisk pair, 10-16 % slower on the
+    /// railway CAD pairs, and it holds mesh + tree at about 105-110 B per triangle against
+    /// 156-165 at leaf 1 (target ≤ 150).
     pub max_leaf_triangles: u32,
 }
 
@@ -52,7 +58,7 @@ impl Default for BuildOptions {
     fn default() -> Self {
         Self {
             fit: FitMethod::VertexCovariance,
-            max_leaf_triangles: 1,
+            max_leaf_triangles: 2,
         }
     }
 }
@@ -63,14 +69,18 @@ impl Default for BuildOptions {
 /// use frcd_obb::{BuildOptions, ObbTree};
 /// let mesh = frcd_geom::shapes::icosphere(1.0, 2);
 /// let tree = ObbTree::build(&mesh, &BuildOptions::default());
-/// assert_eq!(tree.nodes().len(), 2 * mesh.triangle_count() - 1);
+/// assert!(tree.node_count() < 2 * mesh.triangle_count());
 /// assert_eq!(tree.triangles().len(), mesh.triangle_count());
 /// ```
 #[derive(Clone, Debug)]
 pub struct ObbTree {
-    pub(crate) nodes: Vec<Node>,
+    /// Traversal nodes (depth-first, node 0 the root), 64 bytes each.
+    pub(crate) nodes: Vec<TNode>,
     pub(crate) order: Vec<u32>,
-    pub(crate) triangles: Vec<Triangle>,
+    /// Bit `k` set when leaf-order entry `k` ends its leaf.
+    pub(crate) ends: Vec<u64>,
+    /// The mesh, shared (the tree keeps no copy of its triangles).
+    pub(crate) mesh: Arc<TriMesh>,
     pub(crate) sphere: Sphere,
     pub(crate) aabb: Aabb,
     /// Largest |coordinate| norm of the mesh (local frame), for error bounds.
@@ -92,7 +102,66 @@ impl ObbTree {
     /// tightest there is, whatever the fit rule.
     /// `O(n log n)` for balanced splits; an explicit stack keeps degenerate inputs off the call
     /// stack.
+    ///
+    /// The tree holds the mesh: this clones it once into an [`Arc`]; use
+    /// [`ObbTree::build_shared`] to share a mesh you already hold in an `Arc` without a copy.
     pub fn build(mesh: &TriMesh, options: &BuildOptions) -> ObbTree {
+        Self::build_shared(Arc::new(mesh.clone()), options)
+    }
+
+    /// [`ObbTree::build`] on a shared mesh: the tree keeps this `Arc` (no copy of the mesh) and
+    /// reads triangles through it.
+    ///
+    /// ```
+    /// use std::sync::Arc;
+    /// use frcd_obb::{BuildOptions, ObbTree};
+    /// let mesh = Arc::new(frcd_geom::shapes::icosphere(1.0, 2));
+    /// let tree = ObbTree::build_shared(mesh.clone(), &BuildOptions::default());
+    /// assert!(Arc::ptr_eq(tree.mesh(), &mesh));
+    /// assert_eq!(tree.triangle(7), mesh.triangle(7));
+    /// ```
+    pub fn build_shared(mesh: Arc<TriMesh>, options: &BuildOptions) -> ObbTree {
+        let (nodes, order) = build_nodes(&mesh, options);
+        ObbTree::assemble(mesh, &nodes, order)
+    }
+
+    /// The tree from the build's output: the f64 nodes converted to the compact traversal
+    /// layout (`nodes.rs`), and the whole-mesh volumes.
+    fn assemble(mesh: Arc<TriMesh>, nodes: &[Node], order: Vec<u32>) -> Self {
+        let (nodes, ends) = nodes::compact(nodes, order.len());
+        Self::from_compact(mesh, nodes, order, ends)
+    }
+
+    /// The tree from compact nodes, the leaf order and its end bits (checked by the caller).
+    pub(crate) fn from_compact(
+        mesh: Arc<TriMesh>,
+        nodes: Vec<TNode>,
+        order: Vec<u32>,
+        ends: Vec<u64>,
+    ) -> Self {
+        let points = mesh.vertices();
+        let sphere = Sphere::from_points(points);
+        let aabb = mesh.aabb();
+        let radius_from_origin = aabb.min.abs().max(aabb.max.abs()).length();
+        ObbTree {
+            nodes,
+            order,
+            ends,
+            sphere,
+            aabb,
+            radius_from_origin,
+            component_points: component_points(&mesh),
+            closed: mesh.topology().is_closed(),
+            uid: NEXT_UID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
+            mesh,
+        }
+    }
+}
+
+/// The build proper: depth-first f64 nodes (node 0 the root) and the leaf order of the mesh's
+/// triangles.
+fn build_nodes(mesh: &TriMesh, options: &BuildOptions) -> (Vec<Node>, Vec<u32>) {
+    {
         let triangles: Vec<Triangle> = mesh.triangles().collect();
         let n = triangles.len();
         let leaf = options.max_leaf_triangles.max(1) as usize;
@@ -137,34 +206,52 @@ impl ObbTree {
             stack.push((mid, hi, index));
             stack.push((lo, mid, u32::MAX));
         }
-        let points = mesh.vertices();
-        let sphere = Sphere::from_points(points);
-        let aabb = mesh.aabb();
-        let radius_from_origin = aabb.min.abs().max(aabb.max.abs()).length();
-        ObbTree {
-            nodes,
-            order,
-            triangles,
-            sphere,
-            aabb,
-            radius_from_origin,
-            component_points: component_points(mesh),
-            closed: mesh.topology().is_closed(),
-            uid: NEXT_UID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
-        }
+        (nodes, order)
     }
+}
 
-    /// The nodes, depth-first; node 0 is the root.
-    pub fn nodes(&self) -> &[Node] {
-        &self.nodes
+impl ObbTree {
+    /// The nodes, depth-first (node 0 is the root), as f64 views ([`ObbTree::node`]); builds
+    /// the list (the tree stores compact f32 nodes).
+    pub fn nodes(&self) -> Vec<Node> {
+        (0..self.nodes.len() as u32).map(|i| self.node(i)).collect()
+    }
+    /// Number of nodes.
+    pub fn node_count(&self) -> usize {
+        self.nodes.len()
+    }
+    /// Node `i` (`i < node_count()`) as an f64 view: links as built, and an f64 box with
+    /// orthonormal axes holding the stored f32 box, hence every triangle below the node.
+    pub fn node(&self, i: u32) -> Node {
+        let n = &self.nodes[i as usize];
+        let (right, first, count) = if n.is_leaf() {
+            (0, n.first(), nodes::leaf_len(&self.ends, n.first()))
+        } else {
+            (n.right(), 0, 0)
+        };
+        Node {
+            obb: n.obb(),
+            right,
+            first,
+            count,
+        }
     }
     /// Mesh triangle indices in leaf order: a leaf holds `order[first .. first + count]`.
     pub fn leaf_triangles(&self) -> &[u32] {
         &self.order
     }
-    /// The mesh's triangles (local frame), indexed as in the input mesh.
-    pub fn triangles(&self) -> &[Triangle] {
-        &self.triangles
+    /// The mesh's triangles (local frame), indexed as in the input mesh, read through the mesh
+    /// (the tree keeps no copy): use [`ObbTree::triangle`] for one.
+    pub fn triangles(&self) -> impl ExactSizeIterator<Item = Triangle> + '_ {
+        self.mesh.triangles()
+    }
+    /// Number of triangles of the mesh.
+    pub fn triangle_count(&self) -> usize {
+        self.mesh.triangle_count()
+    }
+    /// The mesh the tree was built over (shared, not copied).
+    pub fn mesh(&self) -> &Arc<TriMesh> {
+        &self.mesh
     }
     /// Bounding sphere of the whole mesh (local frame), part of the hybrid top volume.
     pub fn bounding_sphere(&self) -> Sphere {
@@ -197,7 +284,7 @@ impl ObbTree {
     /// A node's box in the mesh's local frame, in f64, containing every triangle below it.
     #[allow(dead_code)]
     pub(crate) fn node_obb(&self, node: u32) -> Obb {
-        self.nodes[node as usize].obb
+        self.nodes[node as usize].obb()
     }
     /// The children of an internal node (none for a leaf).
     #[allow(dead_code)]
@@ -206,37 +293,47 @@ impl ObbTree {
         let kids = if n.is_leaf() {
             [0, 0]
         } else {
-            [node + 1, n.right]
+            [node + 1, n.right()]
         };
         kids.into_iter().take(if n.is_leaf() { 0 } else { 2 })
     }
     /// The input-mesh triangle indices of a leaf (empty for an internal node).
     #[allow(dead_code)]
+    #[inline]
     pub(crate) fn node_triangles(&self, node: u32) -> &[u32] {
         let n = &self.nodes[node as usize];
-        &self.order[n.first as usize..(n.first + n.count) as usize]
+        if !n.is_leaf() {
+            return &[];
+        }
+        let first = n.first();
+        let count = nodes::leaf_len(&self.ends, first);
+        &self.order[first as usize..(first + count) as usize]
     }
-    /// Triangle `tri` (input-mesh index) in the mesh's local frame.
-    #[allow(dead_code)]
-    pub(crate) fn triangle(&self, tri: u32) -> Triangle {
-        self.triangles[tri as usize]
+    /// Triangle `tri` (input-mesh index, `< triangle_count()`) in the mesh's local frame.
+    #[inline]
+    pub fn triangle(&self, tri: u32) -> Triangle {
+        self.mesh.triangle(tri as usize)
     }
 
-    /// Heap and inline bytes held by the tree (nodes, triangle copies, leaf order, component
-    /// points), not counting the mesh it was built from: divide by the triangle count for the
-    /// per-triangle cost reported in the crate README.
+    /// Heap and inline bytes held by the tree itself (nodes, leaf order and its end bits,
+    /// component points), not counting the mesh, which it shares through an `Arc` (count it
+    /// once with [`TriMesh::memory_bytes`] however many trees share it; [`ObbTree::build`]
+    /// gives the tree its own copy, [`ObbTree::build_shared`] none). Mesh plus tree, divided by
+    /// the triangle count, is the per-triangle cost reported in the crate README.
     ///
     /// ```
+    /// use std::sync::Arc;
     /// use frcd_obb::{BuildOptions, ObbTree};
-    /// let mesh = frcd_geom::shapes::icosphere(1.0, 3);
-    /// let tree = ObbTree::build(&mesh, &BuildOptions::default());
-    /// assert!(tree.memory_bytes() > 72 * mesh.triangle_count());
+    /// let mesh = Arc::new(frcd_geom::shapes::icosphere(1.0, 3));
+    /// let tree = ObbTree::build_shared(mesh.clone(), &BuildOptions::default());
+    /// let per_triangle = (mesh.memory_bytes() + tree.memory_bytes()) / mesh.triangle_count();
+    /// assert!(per_triangle > 64 && per_triangle < 200, "{per_triangle}");
     /// ```
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Self>()
-            + self.nodes.capacity() * std::mem::size_of::<Node>()
+            + self.nodes.capacity() * std::mem::size_of::<TNode>()
             + self.order.capacity() * std::mem::size_of::<u32>()
-            + self.triangles.capacity() * std::mem::size_of::<Triangle>()
+            + self.ends.capacity() * std::mem::size_of::<u64>()
             + self.component_points.capacity() * std::mem::size_of::<DVec3>()
     }
 
@@ -249,7 +346,7 @@ impl ObbTree {
             let node = &self.nodes[i as usize];
             if !node.is_leaf() {
                 stack.push((i + 1, d + 1));
-                stack.push((node.right, d + 1));
+                stack.push((node.right(), d + 1));
             }
         }
         best
