@@ -1,0 +1,54 @@
+//! Build time and tree shape for the two `obb/build` bench meshes (icosphere 20k, knot 50k): a
+//! quick probe beside the criterion bench, for profiling (`perf record`) without criterion.
+//!
+//! ```text
+//! cargo run --release -p frcd-obb --example build_probe -- [reps]
+//! ```
+
+use frcd_geom::TriMesh;
+use frcd_geom::shapes::{TorusKnotParams, icosphere, torus_knot};
+use frcd_obb::{BuildOptions, ObbTree};
+use std::time::Instant;
+
+fn main() {
+    let reps: usize = std::env::args()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(20);
+    let knot = torus_knot(&TorusKnotParams {
+        tubular_segments: 1040,
+        radial_segments: 24,
+        ..TorusKnotParams::default()
+    })
+    .expect("valid knot");
+    let meshes: [(&str, TriMesh); 2] = [("icosphere_20k", icosphere(1.0, 5)), ("knot_50k", knot)];
+    for (name, mesh) in &meshes {
+        let _ = mesh.topology();
+        let opts = BuildOptions::default();
+        let mut times = Vec::new();
+        let mut tree = ObbTree::build(mesh, &opts);
+        for _ in 0..reps {
+            let t0 = Instant::now();
+            tree = ObbTree::build(mesh, &opts);
+            times.push(t0.elapsed().as_secs_f64() * 1e3);
+        }
+        times.sort_by(f64::total_cmp);
+        // Shape: total volume and surface of the boxes (a tree-quality proxy), depth.
+        let (mut vol, mut area) = (0.0, 0.0);
+        for n in tree.nodes() {
+            let e = n.obb.half_extents;
+            vol += 8.0 * e.x * e.y * e.z;
+            area += 8.0 * (e.x * e.y + e.y * e.z + e.z * e.x);
+        }
+        println!(
+            "{name}: {} tris, build min {:.2} ms, median {:.2} ms; {} nodes, depth {}, sum vol {:.6e}, sum area {:.6e}",
+            mesh.triangle_count(),
+            times[0],
+            times[times.len() / 2],
+            tree.nodes().len(),
+            tree.depth(),
+            vol,
+            area
+        );
+    }
+}
