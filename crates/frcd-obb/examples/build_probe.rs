@@ -11,6 +11,10 @@ use frcd_obb::{BuildOptions, ObbTree};
 use std::time::Instant;
 
 fn main() {
+    if std::env::var("EIGEN").is_ok() {
+        eigen_timing();
+        return;
+    }
     let reps: usize = std::env::args()
         .nth(1)
         .and_then(|s| s.parse().ok())
@@ -51,4 +55,41 @@ fn main() {
             area
         );
     }
+}
+
+#[allow(dead_code)]
+fn eigen_timing() {
+    use frcd_geom::{DMat3, DVec3};
+    let mut s = 1u64;
+    let mut r = || {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let ms: Vec<DMat3> = (0..100_000)
+        .map(|_| {
+            let a = DMat3::from_cols(
+                DVec3::new(r(), r(), r()),
+                DVec3::new(r(), r(), r()),
+                DVec3::new(r(), r(), r()),
+            );
+            a * a.transpose()
+        })
+        .collect();
+    let t0 = Instant::now();
+    let mut acc = 0.0;
+    for m in &ms {
+        acc += frcd_geom::eigen::symmetric_eigen(*m).unwrap().1.x_axis.x;
+    }
+    let t1 = Instant::now();
+    for m in &ms {
+        acc += frcd_geom::eigen::symmetric_eigen_jacobi(*m).1.x_axis.x;
+    }
+    let t2 = Instant::now();
+    println!(
+        "eigen closed {:.1} ns, jacobi {:.1} ns ({acc})",
+        (t1 - t0).as_secs_f64() * 1e4,
+        (t2 - t1).as_secs_f64() * 1e4
+    );
 }
