@@ -62,15 +62,17 @@ fn closed_form(max_abs: f64, a: [f64; 6]) -> Option<(DVec3, DMat3)> {
     if norm == 0.0 {
         return Some(sorted_diagonal([a00, a11, a22], max_abs));
     }
-    let q = (a00 + a11 + a22) / 3.0;
+    // Few divisions and square roots: they are most of this function's latency.
+    let q = (a00 + a11 + a22) * (1.0 / 3.0);
     let (b00, b11, b22) = (a00 - q, a11 - q, a22 - q);
-    let p = ((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * norm) / 6.0).sqrt();
+    let p = ((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * norm) * (1.0 / 6.0)).sqrt();
+    let inv_p = 1.0 / p;
     let c00 = b11 * b22 - a12 * a12;
     let c01 = a01 * b22 - a12 * a02;
     let c02 = a01 * a12 - b11 * a02;
-    let det = (b00 * c00 - a01 * c01 + a02 * c02) / (p * p * p);
+    let det = (b00 * c00 - a01 * c01 + a02 * c02) * (inv_p * inv_p * inv_p);
     let half_det = (0.5 * det).clamp(-1.0, 1.0);
-    let angle = half_det.acos() / 3.0;
+    let angle = half_det.acos() * (1.0 / 3.0);
     const TWO_THIRDS_PI: f64 = 2.0 * std::f64::consts::FRAC_PI_3;
     let rows = [
         DVec3::new(a00, a01, a02),
@@ -88,10 +90,15 @@ fn closed_form(max_abs: f64, a: [f64; 6]) -> Option<(DVec3, DMat3)> {
     };
     let w = eigenvector_of_simple(rows, lone)?;
     let ([l0, l1], [v0, v1]) = pair_in_complement(rows, w);
+    // Three compare-exchanges sort the pairs ascending.
     let mut e = [(lone, w), (l0, v0), (l1, v1)];
-    e.sort_by(|x, y| x.0.total_cmp(&y.0));
+    for (i, j) in [(0, 1), (1, 2), (0, 1)] {
+        if e[j].0 < e[i].0 {
+            e.swap(i, j);
+        }
+    }
     let vectors = DMat3::from_cols(e[0].1, e[1].1, e[0].1.cross(e[1].1));
-    if !vectors.is_finite() {
+    if !vectors.is_finite() || !(e[0].0 <= e[1].0 && e[1].0 <= e[2].0) {
         return None;
     }
     let values = DVec3::new(e[0].0, e[1].0, e[2].0);
@@ -125,7 +132,7 @@ fn eigenvector_of_simple(rows: [DVec3; 3], value: f64) -> Option<DVec3> {
         2
     };
     let len = d[k].sqrt();
-    (len > 0.0 && len.is_finite()).then(|| c[k] / len)
+    (len > 0.0 && len.is_finite()).then(|| c[k] * (1.0 / len))
 }
 
 /// The other two eigenpairs, orthogonal to the unit eigenvector `w`: the 2×2 restriction of `A`
@@ -133,9 +140,9 @@ fn eigenvector_of_simple(rows: [DVec3; 3], value: f64) -> Option<DVec3> {
 /// the two eigenvalues are).
 fn pair_in_complement(rows: [DVec3; 3], w: DVec3) -> ([f64; 2], [DVec3; 2]) {
     let u = if w.x.abs() > w.y.abs() {
-        DVec3::new(-w.z, 0.0, w.x) / (w.x * w.x + w.z * w.z).sqrt()
+        DVec3::new(-w.z, 0.0, w.x) * (1.0 / (w.x * w.x + w.z * w.z).sqrt())
     } else {
-        DVec3::new(0.0, w.z, -w.y) / (w.y * w.y + w.z * w.z).sqrt()
+        DVec3::new(0.0, w.z, -w.y) * (1.0 / (w.y * w.y + w.z * w.z).sqrt())
     };
     let v = w.cross(u);
     let mul = |x: DVec3| DVec3::new(rows[0].dot(x), rows[1].dot(x), rows[2].dot(x));

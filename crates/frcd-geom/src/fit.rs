@@ -170,15 +170,9 @@ pub fn symmetric_eigen_axes(m: DMat3) -> DMat3 {
     let Some((_, v)) = crate::eigen::symmetric_eigen(m) else {
         return DMat3::IDENTITY;
     };
-    let x = v.z_axis.normalize();
-    let y0 = v.y_axis;
-    // Re-orthonormalise and make right-handed.
-    let y = (y0 - x * x.dot(y0)).normalize();
-    let z = x.cross(y);
-    if !(x.is_finite() && y.is_finite() && z.is_finite()) {
-        return DMat3::IDENTITY;
-    }
-    DMat3::from_cols(x, y, z)
+    // Already orthonormal to rounding (finite: checked there); major axis first, right-handed.
+    let (x, y) = (v.z_axis, v.y_axis);
+    DMat3::from_cols(x, y, x.cross(y))
 }
 
 #[cfg(test)]

@@ -31,11 +31,13 @@ fn main() {
         let opts = BuildOptions::default();
         let mut times = Vec::new();
         let mut tree = ObbTree::build(mesh, &opts);
+        let cpu0 = cpu_seconds();
         for _ in 0..reps {
             let t0 = Instant::now();
             tree = ObbTree::build(mesh, &opts);
             times.push(t0.elapsed().as_secs_f64() * 1e3);
         }
+        let cpu = (cpu_seconds() - cpu0) / reps as f64 * 1e3;
         times.sort_by(f64::total_cmp);
         // Shape: total volume and surface of the boxes (a tree-quality proxy), depth.
         let (mut vol, mut area) = (0.0, 0.0);
@@ -45,7 +47,7 @@ fn main() {
             area += 8.0 * (e.x * e.y + e.y * e.z + e.z * e.x);
         }
         println!(
-            "{name}: {} tris, build min {:.2} ms, median {:.2} ms; {} nodes, depth {}, sum vol {:.6e}, sum area {:.6e}",
+            "{name}: {} tris, build min {:.2} ms, median {:.2} ms, cpu {cpu:.2} ms; {} nodes, depth {}, sum vol {:.6e}, sum area {:.6e}",
             mesh.triangle_count(),
             times[0],
             times[times.len() / 2],
@@ -92,4 +94,17 @@ fn eigen_timing() {
         (t1 - t0).as_secs_f64() * 1e4,
         (t2 - t1).as_secs_f64() * 1e4
     );
+}
+
+/// This process's user + system CPU time (Linux `/proc`; 0 elsewhere): on a loaded machine a
+/// steadier measure than wall time.
+fn cpu_seconds() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0.0;
+    };
+    // Fields after the command name (which is in parentheses): utime and stime are 14 and 15.
+    let rest = stat.rsplit(')').next().unwrap_or("");
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    (ticks(11) + ticks(12)) / 100.0
 }

@@ -20,6 +20,8 @@ use frcd_geom::{DMat3, DVec3, Obb, TriMesh, Triangle};
 /// node's triangles are one contiguous slice.
 pub(crate) fn build_nodes(mesh: &TriMesh, options: &BuildOptions) -> (Vec<Node>, Vec<u32>) {
     let mut tris: Vec<Triangle> = mesh.triangles().collect();
+    // Each triangle's largest `|p|₁` (the box's rounding slack scales with it), permuted alongside.
+    let mut mags: Vec<f64> = tris.iter().map(magnitude).collect();
     let n = tris.len();
     let leaf = options.max_leaf_triangles.max(1) as usize;
     let mut order: Vec<u32> = (0..n as u32).collect();
@@ -54,7 +56,8 @@ pub(crate) fn build_nodes(mesh: &TriMesh, options: &BuildOptions) -> (Vec<Node>,
                 hull_surface_axes(&node.iter().flat_map(|t| t.v).collect::<Vec<_>>())
             }
         };
-        let (obb, mid, sums) = box_and_split(axes, mean, &mut order[lo..hi], node);
+        let (obb, mid, sums) =
+            box_and_split(axes, mean, &mut order[lo..hi], node, &mut mags[lo..hi]);
         nodes.push(Node {
             obb,
             right: 0,
@@ -65,6 +68,11 @@ pub(crate) fn build_nodes(mesh: &TriMesh, options: &BuildOptions) -> (Vec<Node>,
         stack.push((lo, lo + mid, u32::MAX, sums[0]));
     }
     (nodes, order)
+}
+
+/// The largest `p.abs().element_sum()` over the triangle's vertices.
+fn magnitude(t: &Triangle) -> f64 {
+    t.v.iter().fold(0.0f64, |m, p| m.max(p.abs().element_sum()))
 }
 
 /// The covariance of the triangles' vertices about `mean` (their mean: the mean of the
@@ -100,6 +108,7 @@ fn box_and_split(
     mean: DVec3,
     order: &mut [u32],
     tris: &mut [Triangle],
+    mags: &mut [f64],
 ) -> (Obb, usize, [DVec3; 2]) {
     let len = tris.len();
     let t = axes.transpose();
@@ -117,8 +126,8 @@ fn box_and_split(
             let q = t * p;
             lo = lo.min(q);
             hi = hi.max(q);
-            mag = mag.max(p.abs().element_sum());
         }
+        mag = mag.max(mags[i]);
         let c = tri.centroid();
         if axis.dot(c) < cut {
             sums[0] += c;
@@ -128,13 +137,14 @@ fn box_and_split(
             j -= 1;
             order.swap(i, j);
             tris.swap(i, j);
+            mags.swap(i, j);
         }
     }
     let obb = Obb::from_projection_bounds(axes, lo, hi, mag);
     if i > 0 && i < len {
         return (obb, i, sums);
     }
-    let mid = split_fallback(&axes, mean, order, tris);
+    let mid = split_fallback(&axes, mean, order, tris, mags);
     let sum = |s: &[Triangle]| s.iter().map(Triangle::centroid).sum::<DVec3>();
     let sums = [sum(&tris[..mid]), sum(&tris[mid..])];
     (obb, mid, sums)
@@ -165,6 +175,7 @@ fn split_fallback(
     mean: DVec3,
     order: &mut [u32],
     tris: &mut [Triangle],
+    mags: &mut [f64],
 ) -> usize {
     let len = order.len();
     for axis in [obb_axes.y_axis, obb_axes.z_axis] {
@@ -178,6 +189,7 @@ fn split_fallback(
                 j -= 1;
                 order.swap(i, j);
                 tris.swap(i, j);
+                mags.swap(i, j);
             }
         }
         if i > 0 && i < len {
@@ -373,7 +385,14 @@ mod tests {
             }
             let mean =
                 tris[lo..hi].iter().map(Triangle::centroid).sum::<DVec3>() / (hi - lo) as f64;
-            let (_, mid, _) = box_and_split(obb.axes, mean, &mut order[lo..hi], &mut tris[lo..hi]);
+            let mut mags: Vec<f64> = tris[lo..hi].iter().map(magnitude).collect();
+            let (_, mid, _) = box_and_split(
+                obb.axes,
+                mean,
+                &mut order[lo..hi],
+                &mut tris[lo..hi],
+                &mut mags,
+            );
             stack.push((lo, lo + mid));
             stack.push((lo + mid, hi));
         }
