@@ -13,11 +13,11 @@ use frcd_geom::{DMat3, DVec3, Obb, TriMesh, Triangle};
 
 /// Builds the nodes (depth-first, node 0 the root) and the leaf order of `mesh`'s triangles.
 ///
-/// Each internal node costs two passes over its triangles: the covariance about its mean (known
-/// from its parent's pass), then one fused pass that projects its vertices on the fitted axes
-/// (the box) and partitions the triangles about the split plane while summing each side's
-/// centroids (the children's means). Triangles are permuted in place alongside `order`, so a
-/// node's triangles are one contiguous slice.
+/// Each internal node costs one pass over its triangles, which projects its vertices on the
+/// fitted axes (the box), partitions the triangles about the split plane and sums each side's
+/// moments (the children's means and covariances, see [`Moments`]), and one eigen-solve.
+/// Triangles are permuted in place alongside `order`, so a node's triangles are one contiguous
+/// slice.
 pub(crate) fn build_nodes(mesh: &TriMesh, options: &BuildOptions) -> (Vec<Node>, Vec<u32>) {
     let mut tris: Vec<Triangle> = mesh.triangles().collect();
     // Each triangle's largest `|p|₁` (the box's rounding slack scales with it), permuted alongside.
@@ -26,10 +26,13 @@ pub(crate) fn build_nodes(mesh: &TriMesh, options: &BuildOptions) -> (Vec<Node>,
     let leaf = options.max_leaf_triangles.max(1) as usize;
     let mut order: Vec<u32> = (0..n as u32).collect();
     let mut nodes: Vec<Node> = Vec::with_capacity(2 * n.div_ceil(leaf));
-    let root_sum = tris.iter().map(Triangle::centroid).sum::<DVec3>();
-    // (lo, hi, parent whose `right` this node is or u32::MAX, sum of the node's centroids)
-    let mut stack: Vec<(usize, usize, u32, DVec3)> = vec![(0, n, u32::MAX, root_sum)];
-    while let Some((lo, hi, parent, centroid_sum)) = stack.pop() {
+    let root = {
+        let mean = tris.iter().map(Triangle::centroid).sum::<DVec3>() / n.max(1) as f64;
+        Moments::of(&tris, mean)
+    };
+    // (lo, hi, parent whose `right` this node is or u32::MAX, the node's moments)
+    let mut stack: Vec<(usize, usize, u32, Moments)> = vec![(0, n, u32::MAX, root)];
+    while let Some((lo, hi, parent, moments)) = stack.pop() {
         let index = nodes.len() as u32;
         if parent != u32::MAX {
             nodes[parent as usize].right = index;
@@ -48,9 +51,14 @@ pub(crate) fn build_nodes(mesh: &TriMesh, options: &BuildOptions) -> (Vec<Node>,
             continue;
         }
         let node = &mut tris[lo..hi];
-        let mean = centroid_sum / (hi - lo) as f64;
+        let mean = moments.centroids / (hi - lo) as f64;
         let axes = match options.fit {
-            FitMethod::VertexCovariance => symmetric_eigen_axes(vertex_covariance(node, mean)),
+            FitMethod::VertexCovariance => {
+                let cov = moments
+                    .covariance(hi - lo)
+                    .unwrap_or_else(|| vertex_covariance(node, mean));
+                symmetric_eigen_axes(cov)
+            }
             FitMethod::AreaWeighted => area_weighted_axes(node),
             FitMethod::HullSurface => {
                 hull_surface_axes(&node.iter().flat_map(|t| t.v).collect::<Vec<_>>())
@@ -64,10 +72,85 @@ pub(crate) fn build_nodes(mesh: &TriMesh, options: &BuildOptions) -> (Vec<Node>,
             first: 0,
             count: 0,
         });
-        stack.push((lo + mid, hi, index, sums[1]));
-        stack.push((lo, lo + mid, u32::MAX, sums[0]));
+        let [left, right] = sums;
+        stack.push((lo + mid, hi, index, right));
+        stack.push((lo, lo + mid, u32::MAX, left));
     }
     (nodes, order)
+}
+
+/// Sums over a node's triangles, gathered by its parent's pass: the centroids (their mean is the
+/// vertices' mean and the split point) and the vertices' first and second moments about a
+/// reference point `r` near the node (the parent's mean), from which the covariance follows
+/// without another pass.
+#[derive(Clone, Copy, Debug)]
+struct Moments {
+    centroids: DVec3,
+    r: DVec3,
+    first: DVec3,
+    second: [f64; 6],
+}
+
+impl Moments {
+    fn new(r: DVec3) -> Self {
+        Self {
+            centroids: DVec3::ZERO,
+            r,
+            first: DVec3::ZERO,
+            second: [0.0; 6],
+        }
+    }
+
+    /// The moments of `tris` about `r`.
+    fn of(tris: &[Triangle], r: DVec3) -> Self {
+        let mut m = Self::new(r);
+        for t in tris {
+            m.add(t, t.centroid());
+        }
+        m
+    }
+
+    #[inline(always)]
+    fn add(&mut self, t: &Triangle, centroid: DVec3) {
+        self.centroids += centroid;
+        for p in t.v {
+            let d = p - self.r;
+            self.first += d;
+            self.second[0] += d.x * d.x;
+            self.second[1] += d.x * d.y;
+            self.second[2] += d.x * d.z;
+            self.second[3] += d.y * d.y;
+            self.second[4] += d.y * d.z;
+            self.second[5] += d.z * d.z;
+        }
+    }
+
+    /// The vertices' covariance `Σ d dᵀ / 3n − m mᵀ` (`m` the mean of `d`), or `None` where the
+    /// node's mean lies so far from `r` (over 10 standard deviations) that the subtraction would
+    /// cancel more than a few digits: then the caller takes the two-pass covariance about the
+    /// mean instead.
+    fn covariance(&self, count: usize) -> Option<DMat3> {
+        let inv = 1.0 / (3 * count) as f64;
+        let m = self.first * inv;
+        let s = self.second.map(|x| x * inv);
+        let c = [
+            s[0] - m.x * m.x,
+            s[1] - m.x * m.y,
+            s[2] - m.x * m.z,
+            s[3] - m.y * m.y,
+            s[4] - m.y * m.z,
+            s[5] - m.z * m.z,
+        ];
+        let trace = c[0] + c[3] + c[5];
+        if !(m.length_squared() <= 100.0 * trace) || !trace.is_finite() {
+            return None;
+        }
+        Some(DMat3::from_cols(
+            DVec3::new(c[0], c[1], c[2]),
+            DVec3::new(c[1], c[3], c[4]),
+            DVec3::new(c[2], c[4], c[5]),
+        ))
+    }
 }
 
 /// The largest `p.abs().element_sum()` over the triangle's vertices.
@@ -100,16 +183,16 @@ fn vertex_covariance(tris: &[Triangle], mean: DVec3) -> DMat3 {
 
 /// One pass over a node's triangles (at least two): its box with the given axes (exactly
 /// [`Obb::from_points_with_axes`] over their vertices) and a partition about the plane through
-/// `mean` across the major axis, summing each side's centroids. Returns the box, the size of
-/// the left part (in `1..len`) and the two sides' centroid sums. The other two axes are tried
-/// when one side would be empty, and the list is halved when all three fail.
+/// `mean` across the major axis, summing each side's [`Moments`] about `mean`. Returns the box,
+/// the size of the left part (in `1..len`) and the two sides' moments. The other two axes are
+/// tried when one side would be empty, and the list is halved when all three fail.
 fn box_and_split(
     axes: DMat3,
     mean: DVec3,
     order: &mut [u32],
     tris: &mut [Triangle],
     mags: &mut [f64],
-) -> (Obb, usize, [DVec3; 2]) {
+) -> (Obb, usize, [Moments; 2]) {
     let len = tris.len();
     let t = axes.transpose();
     let axis = axes.x_axis;
@@ -117,7 +200,7 @@ fn box_and_split(
     let mut lo = DVec3::splat(f64::INFINITY);
     let mut hi = DVec3::splat(f64::NEG_INFINITY);
     let mut mag = 0.0f64;
-    let mut sums = [DVec3::ZERO; 2];
+    let mut sums = [Moments::new(mean); 2];
     // Hoare-style partition (`< cut` left): every triangle is looked at exactly once, at `i`.
     let (mut i, mut j) = (0, len);
     while i < j {
@@ -129,11 +212,11 @@ fn box_and_split(
         }
         mag = mag.max(mags[i]);
         let c = tri.centroid();
-        if axis.dot(c) < cut {
-            sums[0] += c;
+        let right = axis.dot(c) >= cut;
+        sums[right as usize].add(&tri, c);
+        if !right {
             i += 1;
         } else {
-            sums[1] += c;
             j -= 1;
             order.swap(i, j);
             tris.swap(i, j);
@@ -145,8 +228,10 @@ fn box_and_split(
         return (obb, i, sums);
     }
     let mid = split_fallback(&axes, mean, order, tris, mags);
-    let sum = |s: &[Triangle]| s.iter().map(Triangle::centroid).sum::<DVec3>();
-    let sums = [sum(&tris[..mid]), sum(&tris[mid..])];
+    let sums = [
+        Moments::of(&tris[..mid], mean),
+        Moments::of(&tris[mid..], mean),
+    ];
     (obb, mid, sums)
 }
 
