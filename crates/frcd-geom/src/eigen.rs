@@ -98,7 +98,7 @@ fn closed_form(max_abs: f64, a: [f64; 6]) -> Option<(DVec3, DMat3)> {
         }
     }
     let vectors = DMat3::from_cols(e[0].1, e[1].1, e[0].1.cross(e[1].1));
-    if !vectors.is_finite() || !(e[0].0 <= e[1].0 && e[1].0 <= e[2].0) {
+    if !(vectors.is_finite() && e[0].0 <= e[1].0 && e[1].0 <= e[2].0) {
         return None;
     }
     let values = DVec3::new(e[0].0, e[1].0, e[2].0);

@@ -142,7 +142,9 @@ impl Moments {
             s[5] - m.z * m.z,
         ];
         let trace = c[0] + c[3] + c[5];
-        if !(m.length_squared() <= 100.0 * trace) || !trace.is_finite() {
+        // Also `None` for NaN (overflowed sums): every comparison with it fails.
+        let close = m.length_squared() <= 100.0 * trace;
+        if !close || !trace.is_finite() {
             return None;
         }
         Some(DMat3::from_cols(
