@@ -249,6 +249,24 @@ impl Obb {
                 half_extents: DVec3::ZERO,
             };
         }
+        Self::from_projection_bounds(axes, lo, hi, point_mag)
+    }
+
+    /// The box [`Obb::from_points_with_axes`] gives, from a pass the caller made itself (a tree
+    /// build fuses it with other work): `lo` and `hi` the componentwise min and max of
+    /// `axes.transpose() * p` over the points `p` (at least one), `point_mag` the max of
+    /// `p.abs().element_sum()`. The rounding slack is added here.
+    ///
+    /// ```
+    /// use frcd_geom::{Obb, DMat3, DVec3};
+    /// let pts = [DVec3::ZERO, DVec3::new(2.0, 1.0, 0.5)];
+    /// let t = DMat3::IDENTITY.transpose();
+    /// let (lo, hi) = (t * pts[0], t * pts[1]);
+    /// let mag = pts.iter().map(|p| p.abs().element_sum()).fold(0.0, f64::max);
+    /// let obb = Obb::from_projection_bounds(DMat3::IDENTITY, lo, hi, mag);
+    /// assert_eq!(obb, Obb::from_points_with_axes(&pts, DMat3::IDENTITY));
+    /// ```
+    pub fn from_projection_bounds(axes: DMat3, lo: DVec3, hi: DVec3, point_mag: f64) -> Self {
         let mid = 0.5 * (lo + hi);
         let half = 0.5 * (hi - lo);
         // Rounding of the projections (each ≤ 3 ulp of |p|₁ for unit axes), of the centre

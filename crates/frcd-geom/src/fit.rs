@@ -163,64 +163,16 @@ fn covariance_axes_of(points: impl Iterator<Item = DVec3> + Clone) -> DMat3 {
     symmetric_eigen_axes(cov)
 }
 
-/// Eigenvectors of a symmetric 3×3 matrix by cyclic Jacobi rotations, returned as the columns of a
-/// right-handed orthonormal basis sorted by decreasing eigenvalue.
+/// Eigenvectors of a symmetric 3×3 matrix ([`crate::eigen::symmetric_eigen`], closed form with
+/// a Jacobi fallback), returned as the columns of a right-handed orthonormal basis sorted by
+/// decreasing eigenvalue. The identity for a zero or non-finite matrix.
 pub fn symmetric_eigen_axes(m: DMat3) -> DMat3 {
-    let mut a = m.to_cols_array_2d();
-    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    let scale = a.iter().flatten().fold(0.0f64, |s, x| s.max(x.abs()));
-    if scale == 0.0 || !scale.is_finite() {
+    let Some((_, v)) = crate::eigen::symmetric_eigen(m) else {
         return DMat3::IDENTITY;
-    }
-    for _sweep in 0..32 {
-        let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
-        if off <= scale * 1e-15 {
-            break;
-        }
-        for (p, q) in [(0usize, 1usize), (0, 2), (1, 2)] {
-            if a[p][q].abs() <= scale * 1e-18 {
-                continue;
-            }
-            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-            let t = if theta == 0.0 { 1.0 } else { t };
-            let cs = 1.0 / (t * t + 1.0).sqrt();
-            let sn = t * cs;
-            // A ← Jᵀ A J: columns p, q, then rows p, q.
-            for row in a.iter_mut() {
-                let (akp, akq) = (row[p], row[q]);
-                row[p] = cs * akp - sn * akq;
-                row[q] = sn * akp + cs * akq;
-            }
-            let (rp, rq) = (a[p], a[q]);
-            for k in 0..3 {
-                a[p][k] = cs * rp[k] - sn * rq[k];
-                a[q][k] = sn * rp[k] + cs * rq[k];
-            }
-            for row in v.iter_mut() {
-                let (vp, vq) = (row[p], row[q]);
-                row[p] = cs * vp - sn * vq;
-                row[q] = sn * vp + cs * vq;
-            }
-        }
-    }
-    // Columns of v (v[row][col]) are eigenvectors; sort by eigenvalue, descending.
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&i, &j| {
-        a[j][j]
-            .partial_cmp(&a[i][i])
-            .unwrap_or(std::cmp::Ordering::Equal)
-    });
-    let col = |k: usize| DVec3::new(v[0][k], v[1][k], v[2][k]).normalize();
-    let x = col(order[0]);
-    let y0 = col(order[1]);
-    // Re-orthonormalise and make right-handed.
-    let y = (y0 - x * x.dot(y0)).normalize();
-    let z = x.cross(y);
-    if !(x.is_finite() && y.is_finite() && z.is_finite()) {
-        return DMat3::IDENTITY;
-    }
-    DMat3::from_cols(x, y, z)
+    };
+    // Already orthonormal to rounding (finite: checked there); major axis first, right-handed.
+    let (x, y) = (v.z_axis, v.y_axis);
+    DMat3::from_cols(x, y, x.cross(y))
 }
 
 #[cfg(test)]

@@ -3,6 +3,7 @@
 #![forbid(unsafe_code)]
 
 mod bounds;
+pub mod eigen;
 pub mod fit;
 pub mod hull;
 mod mesh;

@@ -21,6 +21,7 @@
 //! same f64 operations ([`RelativeFrame`]).
 #![warn(missing_docs)]
 
+mod build;
 mod checked;
 pub mod distance;
 mod nodes;

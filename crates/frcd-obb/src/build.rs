@@ -1,0 +1,515 @@
+//! Building an [`ObbTree`](crate::ObbTree)'s hierarchy: top-down splits with a fitted box per
+//! node.
+//!
+//! The output contract, which the traversal layout is converted from: depth-first `Vec<Node>`
+//! with f64 boxes in the mesh's local frame (left child = next node, `right`; leaves
+//! `first`/`count`) and the `order` permutation of input-mesh triangle indices that leaves index.
+
+use crate::tree::{BuildOptions, Node};
+use frcd_geom::fit::{
+    FitMethod, area_weighted_axes, fit_obb, hull_surface_axes, symmetric_eigen_axes,
+};
+use frcd_geom::{DMat3, DVec3, Obb, TriMesh, Triangle};
+
+/// Builds the nodes (depth-first, node 0 the root) and the leaf order of `mesh`'s triangles.
+///
+/// Each internal node costs one pass over its triangles, which projects its vertices on the
+/// fitted axes (the box), partitions the triangles about the split plane and sums each side's
+/// moments (the children's means and covariances, see [`Moments`]), and one eigen-solve.
+/// Triangles are permuted in place alongside `order`, so a node's triangles are one contiguous
+/// slice.
+pub(crate) fn build_nodes(mesh: &TriMesh, options: &BuildOptions) -> (Vec<Node>, Vec<u32>) {
+    let mut tris: Vec<Triangle> = mesh.triangles().collect();
+    // Each triangle's largest `|p|₁` (the box's rounding slack scales with it), permuted alongside.
+    let mut mags: Vec<f64> = tris.iter().map(magnitude).collect();
+    let n = tris.len();
+    let leaf = options.max_leaf_triangles.max(1) as usize;
+    let mut order: Vec<u32> = (0..n as u32).collect();
+    let mut nodes: Vec<Node> = Vec::with_capacity(2 * n.div_ceil(leaf));
+    let root = {
+        let mean = tris.iter().map(Triangle::centroid).sum::<DVec3>() / n.max(1) as f64;
+        Moments::of(&tris, mean)
+    };
+    // (lo, hi, parent whose `right` this node is or u32::MAX, the node's moments)
+    let mut stack: Vec<(usize, usize, u32, Moments)> = vec![(0, n, u32::MAX, root)];
+    while let Some((lo, hi, parent, moments)) = stack.pop() {
+        let index = nodes.len() as u32;
+        if parent != u32::MAX {
+            nodes[parent as usize].right = index;
+        }
+        if hi - lo <= leaf {
+            let obb = match &tris[lo..hi] {
+                [t] => triangle_obb(t).unwrap_or_else(|| fit_obb(&tris[lo..hi], options.fit)),
+                some => fit_obb(some, options.fit),
+            };
+            nodes.push(Node {
+                obb,
+                right: 0,
+                first: lo as u32,
+                count: (hi - lo) as u32,
+            });
+            continue;
+        }
+        let node = &mut tris[lo..hi];
+        let mean = moments.centroids / (hi - lo) as f64;
+        let axes = match options.fit {
+            FitMethod::VertexCovariance => {
+                let cov = moments
+                    .covariance(hi - lo)
+                    .unwrap_or_else(|| vertex_covariance(node, mean));
+                symmetric_eigen_axes(cov)
+            }
+            FitMethod::AreaWeighted => area_weighted_axes(node),
+            FitMethod::HullSurface => {
+                hull_surface_axes(&node.iter().flat_map(|t| t.v).collect::<Vec<_>>())
+            }
+        };
+        let (obb, mid, sums) =
+            box_and_split(axes, mean, &mut order[lo..hi], node, &mut mags[lo..hi]);
+        nodes.push(Node {
+            obb,
+            right: 0,
+            first: 0,
+            count: 0,
+        });
+        let [left, right] = sums;
+        stack.push((lo + mid, hi, index, right));
+        stack.push((lo, lo + mid, u32::MAX, left));
+    }
+    (nodes, order)
+}
+
+/// Sums over a node's triangles, gathered by its parent's pass: the centroids (their mean is the
+/// vertices' mean and the split point) and the vertices' first and second moments about a
+/// reference point `r` near the node (the parent's mean), from which the covariance follows
+/// without another pass.
+#[derive(Clone, Copy, Debug)]
+struct Moments {
+    centroids: DVec3,
+    r: DVec3,
+    first: DVec3,
+    second: [f64; 6],
+}
+
+impl Moments {
+    fn new(r: DVec3) -> Self {
+        Self {
+            centroids: DVec3::ZERO,
+            r,
+            first: DVec3::ZERO,
+            second: [0.0; 6],
+        }
+    }
+
+    /// The moments of `tris` about `r`.
+    fn of(tris: &[Triangle], r: DVec3) -> Self {
+        let mut m = Self::new(r);
+        for t in tris {
+            m.add(t, t.centroid());
+        }
+        m
+    }
+
+    #[inline(always)]
+    fn add(&mut self, t: &Triangle, centroid: DVec3) {
+        self.centroids += centroid;
+        for p in t.v {
+            let d = p - self.r;
+            self.first += d;
+            self.second[0] += d.x * d.x;
+            self.second[1] += d.x * d.y;
+            self.second[2] += d.x * d.z;
+            self.second[3] += d.y * d.y;
+            self.second[4] += d.y * d.z;
+            self.second[5] += d.z * d.z;
+        }
+    }
+
+    /// The vertices' covariance `Σ d dᵀ / 3n − m mᵀ` (`m` the mean of `d`), or `None` where the
+    /// node's mean lies so far from `r` (over 10 standard deviations) that the subtraction would
+    /// cancel more than a few digits: then the caller takes the two-pass covariance about the
+    /// mean instead.
+    fn covariance(&self, count: usize) -> Option<DMat3> {
+        let inv = 1.0 / (3 * count) as f64;
+        let m = self.first * inv;
+        let s = self.second.map(|x| x * inv);
+        let c = [
+            s[0] - m.x * m.x,
+            s[1] - m.x * m.y,
+            s[2] - m.x * m.z,
+            s[3] - m.y * m.y,
+            s[4] - m.y * m.z,
+            s[5] - m.z * m.z,
+        ];
+        let trace = c[0] + c[3] + c[5];
+        // Also `None` for NaN (overflowed sums): every comparison with it fails.
+        let close = m.length_squared() <= 100.0 * trace;
+        if !close || !trace.is_finite() {
+            return None;
+        }
+        Some(DMat3::from_cols(
+            DVec3::new(c[0], c[1], c[2]),
+            DVec3::new(c[1], c[3], c[4]),
+            DVec3::new(c[2], c[4], c[5]),
+        ))
+    }
+}
+
+/// The largest `p.abs().element_sum()` over the triangle's vertices.
+fn magnitude(t: &Triangle) -> f64 {
+    t.v.iter().fold(0.0f64, |m, p| m.max(p.abs().element_sum()))
+}
+
+/// The covariance of the triangles' vertices about `mean` (their mean: the mean of the
+/// centroids), centred so large offsets cost no precision.
+fn vertex_covariance(tris: &[Triangle], mean: DVec3) -> DMat3 {
+    let mut c = [0.0f64; 6];
+    for t in tris {
+        for p in t.v {
+            let d = p - mean;
+            c[0] += d.x * d.x;
+            c[1] += d.x * d.y;
+            c[2] += d.x * d.z;
+            c[3] += d.y * d.y;
+            c[4] += d.y * d.z;
+            c[5] += d.z * d.z;
+        }
+    }
+    let c = c.map(|x| x / (3 * tris.len()) as f64);
+    DMat3::from_cols(
+        DVec3::new(c[0], c[1], c[2]),
+        DVec3::new(c[1], c[3], c[4]),
+        DVec3::new(c[2], c[4], c[5]),
+    )
+}
+
+/// One pass over a node's triangles (at least two): its box with the given axes (exactly
+/// [`Obb::from_points_with_axes`] over their vertices) and a partition about the plane through
+/// `mean` across the major axis, summing each side's [`Moments`] about `mean`. Returns the box,
+/// the size of the left part (in `1..len`) and the two sides' moments. The other two axes are
+/// tried when one side would be empty, and the list is halved when all three fail.
+fn box_and_split(
+    axes: DMat3,
+    mean: DVec3,
+    order: &mut [u32],
+    tris: &mut [Triangle],
+    mags: &mut [f64],
+) -> (Obb, usize, [Moments; 2]) {
+    let len = tris.len();
+    let t = axes.transpose();
+    let axis = axes.x_axis;
+    let cut = axis.dot(mean);
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    let mut mag = 0.0f64;
+    let mut sums = [Moments::new(mean); 2];
+    // Hoare-style partition (`< cut` left): every triangle is looked at exactly once, at `i`.
+    let (mut i, mut j) = (0, len);
+    while i < j {
+        let tri = tris[i];
+        for p in tri.v {
+            let q = t * p;
+            lo = lo.min(q);
+            hi = hi.max(q);
+        }
+        mag = mag.max(mags[i]);
+        let c = tri.centroid();
+        let right = axis.dot(c) >= cut;
+        sums[right as usize].add(&tri, c);
+        if !right {
+            i += 1;
+        } else {
+            j -= 1;
+            order.swap(i, j);
+            tris.swap(i, j);
+            mags.swap(i, j);
+        }
+    }
+    let obb = Obb::from_projection_bounds(axes, lo, hi, mag);
+    if i > 0 && i < len {
+        return (obb, i, sums);
+    }
+    let mid = split_fallback(&axes, mean, order, tris, mags);
+    let sums = [
+        Moments::of(&tris[..mid], mean),
+        Moments::of(&tris[mid..], mean),
+    ];
+    (obb, mid, sums)
+}
+
+/// The box of one triangle in its own frame (longest edge, in-plane normal to it, normal):
+/// flat and tight whatever the fit rule. `None` for a triangle without a usable normal.
+fn triangle_obb(t: &Triangle) -> Option<Obb> {
+    let e = [t.v[1] - t.v[0], t.v[2] - t.v[1], t.v[0] - t.v[2]];
+    let longest = e
+        .iter()
+        .copied()
+        .max_by(|a, b| a.length_squared().total_cmp(&b.length_squared()))?;
+    let x = longest.normalize_or_zero();
+    let n = t.normal().normalize_or_zero();
+    let z = (n - x * x.dot(n)).normalize_or_zero();
+    if x == DVec3::ZERO || z == DVec3::ZERO || !(x.is_finite() && z.is_finite()) {
+        return None;
+    }
+    let y = z.cross(x);
+    Some(Obb::from_points_with_axes(&t.v, DMat3::from_cols(x, y, z)))
+}
+
+/// [`box_and_split`]'s partition when the major axis leaves one side empty: the other two axes,
+/// then halving. Returns the size of the left part (in `1..len`).
+fn split_fallback(
+    obb_axes: &DMat3,
+    mean: DVec3,
+    order: &mut [u32],
+    tris: &mut [Triangle],
+    mags: &mut [f64],
+) -> usize {
+    let len = order.len();
+    for axis in [obb_axes.y_axis, obb_axes.z_axis] {
+        let cut = axis.dot(mean);
+        let mut i = 0;
+        let mut j = len;
+        while i < j {
+            if axis.dot(tris[i].centroid()) < cut {
+                i += 1;
+            } else {
+                j -= 1;
+                order.swap(i, j);
+                tris.swap(i, j);
+                mags.swap(i, j);
+            }
+        }
+        if i > 0 && i < len {
+            return i;
+        }
+    }
+    // All centroids project to the same point on every axis: halve the list.
+    len / 2
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use frcd_geom::Pose;
+
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> f64 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+        }
+        fn point(&mut self) -> DVec3 {
+            DVec3::new(self.next(), self.next(), self.next())
+        }
+    }
+
+    fn soup(tris: &[[DVec3; 3]]) -> TriMesh {
+        let vertices = tris.iter().flatten().copied().collect();
+        let indices = (0..tris.len() as u32)
+            .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
+            .collect();
+        TriMesh::new(vertices, indices).expect("valid soup")
+    }
+
+    /// `None` where the scale overflows (the mixed mesh at the huge scale).
+    fn scaled(mesh: &TriMesh, s: f64, offset: DVec3) -> Option<TriMesh> {
+        let v = mesh.vertices().iter().map(|&p| p * s + offset).collect();
+        TriMesh::new(v, mesh.indices().to_vec()).ok()
+    }
+
+    /// Random and degenerate meshes, at unit, subnormal, huge and offset scales.
+    fn meshes() -> Vec<(String, TriMesh)> {
+        let mut rng = Rng(9);
+        let random: Vec<[DVec3; 3]> = (0..300)
+            .map(|_| {
+                let c = rng.point() * 10.0;
+                [c + rng.point(), c + rng.point(), c + rng.point()]
+            })
+            .collect();
+        let d = DVec3::new(1.0, 2.0, -0.5);
+        let collinear: Vec<[DVec3; 3]> = (0..40)
+            .map(|i| {
+                let a = i as f64;
+                [d * a, d * (a + 0.5), d * (a + 2.0)]
+            })
+            .collect();
+        let (u, v) = (DVec3::new(1.0, 1.0, 0.0), DVec3::new(0.0, 1.0, 3.0));
+        let coplanar: Vec<[DVec3; 3]> = (0..60)
+            .map(|_| {
+                let mut p = || u * rng.next() + v * rng.next();
+                [p(), p(), p()]
+            })
+            .collect();
+        let point = vec![[DVec3::splat(0.25); 3]; 17];
+        let t = [DVec3::ZERO, DVec3::X, DVec3::new(0.3, 0.7, 0.1)];
+        let duplicates = vec![t; 33];
+        let sphere = frcd_geom::shapes::icosphere(1.0, 3).transformed(&Pose::new(
+            DVec3::new(0.1, -0.2, 0.3),
+            frcd_geom::DQuat::from_rotation_y(0.4),
+        ));
+        let mut mixed = random.clone();
+        mixed.extend(random.iter().take(50).map(|t| t.map(|p| p * 1e-9)));
+        mixed.extend(random.iter().take(50).map(|t| t.map(|p| p * 1e9)));
+        let base: Vec<(&str, TriMesh)> = vec![
+            ("random", soup(&random)),
+            ("collinear", soup(&collinear)),
+            ("coplanar", soup(&coplanar)),
+            ("point", soup(&point)),
+            ("duplicates", soup(&duplicates)),
+            ("sphere", sphere),
+            ("mixed", soup(&mixed)),
+        ];
+        let mut out = Vec::new();
+        for (name, m) in base {
+            for (label, s, offset) in [
+                ("subnormal", 2f64.powi(-1062), DVec3::ZERO),
+                ("huge", 1e305, DVec3::ZERO),
+                ("offset", 1e-3, DVec3::new(1e9, -3e8, 7e7)),
+            ] {
+                out.extend(scaled(&m, s, offset).map(|m| (format!("{name} {label}"), m)));
+            }
+            out.push((name.to_string(), m));
+        }
+        out
+    }
+
+    /// Walks the depth-first nodes; returns each node's range in `order` (`lo..hi`).
+    fn ranges(nodes: &[Node], n: usize) -> Vec<(usize, usize)> {
+        let mut out = vec![(0, 0); nodes.len()];
+        // Children first: a node's range is the union of its children's.
+        fn walk(nodes: &[Node], i: usize, out: &mut [(usize, usize)], next: &mut usize) {
+            let node = &nodes[i];
+            if node.is_leaf() {
+                assert_eq!(node.first as usize, *next, "leaves in depth-first order");
+                out[i] = (*next, *next + node.count as usize);
+                *next += node.count as usize;
+                return;
+            }
+            assert!(
+                node.right as usize > i + 1,
+                "right child after the left subtree"
+            );
+            walk(nodes, i + 1, out, next);
+            walk(nodes, node.right as usize, out, next);
+            out[i] = (out[i + 1].0, out[node.right as usize].1);
+        }
+        let mut next = 0;
+        walk(nodes, 0, &mut out, &mut next);
+        assert_eq!(next, n, "the leaves hold every triangle once");
+        out
+    }
+
+    #[test]
+    fn every_box_holds_its_triangles_and_equals_the_projection_box() {
+        for (name, mesh) in meshes() {
+            for fit in [
+                FitMethod::VertexCovariance,
+                FitMethod::AreaWeighted,
+                FitMethod::HullSurface,
+            ] {
+                for leaf in [1, 3] {
+                    let options = BuildOptions {
+                        fit,
+                        max_leaf_triangles: leaf,
+                    };
+                    let (nodes, order) = build_nodes(&mesh, &options);
+                    let n = mesh.triangle_count();
+                    let mut seen = vec![false; n];
+                    for &t in &order {
+                        assert!(!std::mem::replace(&mut seen[t as usize], true));
+                    }
+                    assert!(seen.iter().all(|&s| s), "{name}: order is a permutation");
+                    let leaves = nodes.iter().filter(|x| x.is_leaf()).count();
+                    assert_eq!(nodes.len(), 2 * leaves - 1, "{name}: a binary tree");
+                    for (i, &(lo, hi)) in ranges(&nodes, n).iter().enumerate() {
+                        let obb = nodes[i].obb;
+                        assert!(obb.half_extents.is_finite() && obb.center.is_finite());
+                        assert!(obb.half_extents.cmpge(DVec3::ZERO).all());
+                        let o = obb.axes.transpose() * obb.axes - DMat3::IDENTITY;
+                        assert!(o.to_cols_array().iter().all(|x| x.abs() < 1e-12));
+                        let points: Vec<DVec3> = order[lo..hi]
+                            .iter()
+                            .flat_map(|&t| mesh.triangle(t as usize).v)
+                            .collect();
+                        for p in &points {
+                            assert!(
+                                obb.contains_point(*p),
+                                "{name} {fit:?} leaf {leaf}: node {i} misses {p}"
+                            );
+                        }
+                        if !nodes[i].is_leaf() {
+                            // The fused pass builds exactly the box of the node's points.
+                            assert_eq!(obb, Obb::from_points_with_axes(&points, obb.axes));
+                            assert!(hi - lo > leaf as usize);
+                        } else {
+                            assert!(hi - lo <= leaf as usize && hi > lo);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The old build (a fit per node, then a separate split pass): the fused build must give
+    /// trees as tight (total box surface within a few percent).
+    fn reference_surface(mesh: &TriMesh) -> f64 {
+        let mut tris: Vec<Triangle> = mesh.triangles().collect();
+        let mut order: Vec<u32> = (0..tris.len() as u32).collect();
+        let mut total = 0.0;
+        let mut stack = vec![(0, tris.len())];
+        while let Some((lo, hi)) = stack.pop() {
+            let obb = fit_obb(&tris[lo..hi], FitMethod::VertexCovariance);
+            let obb = match &tris[lo..hi] {
+                [t] => triangle_obb(t).unwrap_or(obb),
+                _ => obb,
+            };
+            total += surface(&obb);
+            if hi - lo <= 1 {
+                continue;
+            }
+            let mean =
+                tris[lo..hi].iter().map(Triangle::centroid).sum::<DVec3>() / (hi - lo) as f64;
+            let mut mags: Vec<f64> = tris[lo..hi].iter().map(magnitude).collect();
+            let (_, mid, _) = box_and_split(
+                obb.axes,
+                mean,
+                &mut order[lo..hi],
+                &mut tris[lo..hi],
+                &mut mags,
+            );
+            stack.push((lo, lo + mid));
+            stack.push((lo + mid, hi));
+        }
+        total
+    }
+
+    fn surface(obb: &Obb) -> f64 {
+        let e = obb.half_extents;
+        8.0 * (e.x * e.y + e.y * e.z + e.z * e.x)
+    }
+
+    #[test]
+    fn trees_are_as_tight_as_the_per_node_fit() {
+        let knot = frcd_geom::shapes::torus_knot(&frcd_geom::shapes::TorusKnotParams {
+            tubular_segments: 200,
+            radial_segments: 12,
+            ..Default::default()
+        })
+        .expect("valid knot");
+        for (name, mesh) in [
+            ("sphere", frcd_geom::shapes::icosphere(1.0, 4)),
+            ("knot", knot),
+        ] {
+            let (nodes, _) = build_nodes(&mesh, &BuildOptions::default());
+            let got: f64 = nodes.iter().map(|n| surface(&n.obb)).sum();
+            let want = reference_surface(&mesh);
+            assert!(
+                (got / want - 1.0).abs() < 0.03,
+                "{name}: total box surface {got} against {want}"
+            );
+        }
+    }
+}
