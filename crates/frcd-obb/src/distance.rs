@@ -61,6 +61,8 @@
 mod exact;
 #[path = "distance_tri.rs"]
 mod tri;
+#[path = "distance_rss.rs"]
+pub(crate) mod rss;
 
 use crate::query::RelativeFrame;
 use crate::tree::ObbTree;
@@ -340,13 +342,23 @@ struct Placed {
 struct Query<'a> {
     a: &'a ObbTree,
     b: &'a ObbTree,
+    va: &'a [rss::DNode],
+    vb: &'a [rss::DNode],
     frame: RelativeFrame,
     /// Certified slack subtracted from every box lower bound.
     slack: f64,
     magnitude: f64,
     /// Unit direction between the best closest points so far (A's frame).
     dir: Option<DVec3>,
+    /// `dir` mapped into B's frame, and its offset: `dir · (m x + t) = dir_b · x + dir_t`.
+    dir_b: DVec3,
+    dir_t: f64,
     counters: DistanceCounters,
+}
+
+fn mode() -> u32 {
+    static M: std::sync::OnceLock<u32> = std::sync::OnceLock::new();
+    *M.get_or_init(|| std::env::var("FRCD_DMODE").ok().and_then(|v| v.parse().ok()).unwrap_or(0))
 }
 
 /// Relative slack of the box lower bounds (see the module docs, step 2).
@@ -378,10 +390,14 @@ impl<'a> Query<'a> {
         Query {
             a,
             b,
+            va: a.distance_volumes(),
+            vb: b.distance_volumes(),
             frame,
             slack: SLACK_REL * magnitude,
             magnitude,
             dir: None,
+            dir_b: DVec3::ZERO,
+            dir_t: 0.0,
             counters: DistanceCounters::default(),
         }
     }
@@ -391,7 +407,12 @@ impl<'a> Query<'a> {
     }
 
     #[inline]
-    fn place(&self, nb: u32) -> Placed {
+    fn place(&self, nb: u32) -> rss::Placed {
+        self.vb[nb as usize].rss.mapped(&self.frame.m, self.frame.t)
+    }
+
+    #[inline]
+    fn place_box(&self, nb: u32) -> Placed {
         let o = self.b.node_obb(nb);
         Placed {
             axes: self.frame.m * o.axes,
@@ -403,9 +424,49 @@ impl<'a> Query<'a> {
     /// A certified lower bound on the distance between A's node box and B's placed box
     /// (negative when they may overlap, see [`box_lower_bound`]).
     #[inline]
-    fn lower_bound(&mut self, na: u32, pb: &Placed, enough: f64) -> f64 {
+    fn lower_bound(&mut self, na: u32, nb: u32, pb: &rss::Placed, enough: f64) -> f64 {
         self.counters.box_tests += 1;
-        box_lower_bound(&self.a.node_obb(na), pb, self.slack, enough, self.dir)
+        let va = &self.va[na as usize].rss;
+        // The best pair's direction first: at range every pair near the closest region is
+        // separated along it, and it costs a few products (no dependent chain).
+        let mut g = f64::NEG_INFINITY;
+        if let Some(n) = self.dir {
+            g = rss::gap_along(va, pb, n) - self.slack;
+            if g >= enough {
+                return g;
+            }
+        }
+        let (r, _) = rss::lower_bound(va, pb);
+        g = g.max(r - self.slack);
+        if g >= enough || mode() & 1 == 0 {
+            return g;
+        }
+        let pbox = self.place_box(nb);
+        g.max(box_lower_bound(&self.a.node_obb(na), &pbox, self.slack, enough, self.dir))
+    }
+
+    /// Children of A's node (none for a leaf).
+    #[inline(always)]
+    fn kids_a(&self, n: u32) -> impl Iterator<Item = u32> {
+        let d = &self.va[n as usize];
+        d.kids.into_iter().take(if d.is_leaf() { 0 } else { 2 })
+    }
+    #[inline(always)]
+    fn kids_b(&self, n: u32) -> impl Iterator<Item = u32> {
+        let d = &self.vb[n as usize];
+        d.kids.into_iter().take(if d.is_leaf() { 0 } else { 2 })
+    }
+
+    /// Squared size of a node's volume (which node of a pair to split).
+    #[inline]
+    fn size_a(&self, n: u32) -> f64 {
+        let v = &self.va[n as usize].rss;
+        v.a * v.a + v.b * v.b + v.r * v.r
+    }
+    #[inline]
+    fn size_b(&self, n: u32) -> f64 {
+        let v = &self.vb[n as usize].rss;
+        v.a * v.a + v.b * v.b + v.r * v.r
     }
 
     fn b_triangle(&self, t: u32) -> [DVec3; 3] {
@@ -421,21 +482,27 @@ impl<'a> Query<'a> {
         let enough = |best: f64| (best / (1.0 + rel)).min(best - abs);
         let (ra, rb) = (self.a.root_node(), self.b.root_node());
         let pr = self.place(rb);
-        let lb = self.lower_bound(ra, &pr, f64::INFINITY);
+        let lb = self.lower_bound(ra, rb, &pr, f64::INFINITY);
+        if mode() & 4 != 0 {
+            return self.search_depth_first(best, rel, abs, lb);
+        }
         let mut heap: BinaryHeap<Entry> = BinaryHeap::with_capacity(256);
-        heap.push(Entry { lb, a: ra, b: rb });
-        let mut kids_a: Vec<u32> = Vec::with_capacity(2);
-        let mut kids_b: Vec<u32> = Vec::with_capacity(2);
-        while let Some(Entry { lb, a: na, b: nb }) = heap.pop() {
+        // The pair to expand next when it is no farther than the heap's top: the nearer child
+        // of the pair just expanded usually is, and skips a push and a pop.
+        let mut next = Some(Entry { lb, a: ra, b: rb });
+        loop {
+            let Some(Entry { lb, a: na, b: nb }) = next.take().or_else(|| heap.pop()) else {
+                break;
+            };
             if prune(lb, best.d) {
                 // Every other entry has a larger bound.
                 break;
             }
-            kids_a.clear();
-            kids_a.extend(self.a.node_children(na));
-            kids_b.clear();
-            kids_b.extend(self.b.node_children(nb));
-            if kids_a.is_empty() && kids_b.is_empty() {
+            let (leaf_a, leaf_b) = (
+                self.va[na as usize].is_leaf(),
+                self.vb[nb as usize].is_leaf(),
+            );
+            if leaf_a && leaf_b {
                 // A positive certified bound: the triangles cannot touch, skip the exact test.
                 self.leaf_pair(na, nb, best, lb > 0.0);
                 if best.d == 0.0 {
@@ -444,30 +511,95 @@ impl<'a> Query<'a> {
                 continue;
             }
             // Split the larger node (or the one that is not a leaf).
+            let split_a = !leaf_a && (leaf_b || self.size_a(na) >= self.size_b(nb));
+            let mut e = [Entry { lb: 0.0, a: 0, b: 0 }; 2];
+            if split_a {
+                let pb = self.place(nb);
+                for (k, ca) in self.va[na as usize].kids.into_iter().enumerate() {
+                    let lb = self.lower_bound(ca, nb, &pb, enough(best.d));
+                    e[k] = Entry { lb, a: ca, b: nb };
+                }
+            } else {
+                for (k, cb) in self.vb[nb as usize].kids.into_iter().enumerate() {
+                    let pb = self.place(cb);
+                    let lb = self.lower_bound(na, cb, &pb, enough(best.d));
+                    e[k] = Entry { lb, a: na, b: cb };
+                }
+            }
+            if e[1].lb < e[0].lb {
+                e.swap(0, 1);
+            }
+            for (k, x) in e.into_iter().enumerate() {
+                if prune(x.lb, best.d) {
+                    break; // sorted: the other is farther still
+                }
+                if k == 0 && heap.peek().is_none_or(|t| x.lb <= t.lb) {
+                    next = Some(x);
+                } else {
+                    heap.push(x);
+                }
+            }
+        }
+    }
+
+    /// Depth-first, nearer child pair first (PQP's order with a queue of size 2): no heap.
+    fn search_depth_first(&mut self, best: &mut Best, rel: f64, abs: f64, root_lb: f64) {
+        let prune = |lb: f64, best: f64| lb * (1.0 + rel) >= best || lb + abs >= best;
+        let enough = |best: f64| (best / (1.0 + rel)).min(best - abs);
+        let mut stack: Vec<Entry> = Vec::with_capacity(128);
+        stack.push(Entry {
+            lb: root_lb,
+            a: self.a.root_node(),
+            b: self.b.root_node(),
+        });
+        let mut kids_a: Vec<u32> = Vec::with_capacity(2);
+        let mut kids_b: Vec<u32> = Vec::with_capacity(2);
+        while let Some(Entry { lb, a: na, b: nb }) = stack.pop() {
+            if prune(lb, best.d) {
+                continue;
+            }
+            kids_a.clear();
+            kids_a.extend(self.kids_a(na));
+            kids_b.clear();
+            kids_b.extend(self.kids_b(nb));
+            if kids_a.is_empty() && kids_b.is_empty() {
+                self.leaf_pair(na, nb, best, lb > 0.0);
+                if best.d == 0.0 {
+                    return;
+                }
+                continue;
+            }
             let split_a = if kids_a.is_empty() {
                 false
             } else if kids_b.is_empty() {
                 true
             } else {
-                let sa = self.a.node_obb(na).half_extents.length_squared();
-                let sb = self.b.node_obb(nb).half_extents.length_squared();
-                sa >= sb
+                self.size_a(na) >= self.size_b(nb)
             };
+            let mut e = [Entry { lb: 0.0, a: 0, b: 0 }; 2];
+            let mut n = 0;
             if split_a {
                 let pb = self.place(nb);
                 for &ca in &kids_a {
-                    let lb = self.lower_bound(ca, &pb, enough(best.d));
-                    if !prune(lb, best.d) {
-                        heap.push(Entry { lb, a: ca, b: nb });
-                    }
+                    let lb = self.lower_bound(ca, nb, &pb, enough(best.d));
+                    e[n] = Entry { lb, a: ca, b: nb };
+                    n += 1;
                 }
             } else {
                 for &cb in &kids_b {
                     let pb = self.place(cb);
-                    let lb = self.lower_bound(na, &pb, enough(best.d));
-                    if !prune(lb, best.d) {
-                        heap.push(Entry { lb, a: na, b: cb });
-                    }
+                    let lb = self.lower_bound(na, cb, &pb, enough(best.d));
+                    e[n] = Entry { lb, a: na, b: cb };
+                    n += 1;
+                }
+            }
+            // Farther first onto the stack, so the nearer pair is expanded first.
+            if n == 2 && e[0].lb < e[1].lb {
+                e.swap(0, 1);
+            }
+            for x in &e[..n] {
+                if !prune(x.lb, best.d) {
+                    stack.push(*x);
                 }
             }
         }
@@ -476,14 +608,40 @@ impl<'a> Query<'a> {
     fn set_dir(&mut self, pa: DVec3, pb: DVec3, d: f64) {
         let n = (pb - pa) / d;
         self.dir = (d > 0.0 && n.is_finite()).then_some(n);
+        if let Some(n) = self.dir {
+            // n · (m x + t) = (mᵀ n) · x + n · t for B's local points x.
+            self.dir_b = self.frame.m.transpose() * n;
+            self.dir_t = n.dot(self.frame.t);
+        }
     }
 
     fn leaf_pair(&mut self, na: u32, nb: u32, best: &mut Best, apart: bool) {
         for &tb in self.b.node_triangles(nb) {
-            let vb = self.b_triangle(tb);
+            let lb_tri = self.b.triangle(tb).v;
+            let mut vb: Option<[DVec3; 3]> = None;
             for &ta in self.a.node_triangles(na) {
-                self.counters.tri_tests += 1;
                 let va = self.a.triangle(ta).v;
+                if apart {
+                    // Leaf short-cut: the triangles' separation along the best direction so far
+                    // (a certified lower bound up to the slack) often already prunes at range.
+                    // B's triangle is projected in its own frame (`dir_b`, `dir_t`: the
+                    // direction mapped back), so a pruned pair costs no mapping.
+                    if let Some(n) = self.dir {
+                        let (a0, a1, a2) = (n.dot(va[0]), n.dot(va[1]), n.dot(va[2]));
+                        let (b0, b1, b2) = (
+                            self.dir_b.dot(lb_tri[0]) + self.dir_t,
+                            self.dir_b.dot(lb_tri[1]) + self.dir_t,
+                            self.dir_b.dot(lb_tri[2]) + self.dir_t,
+                        );
+                        let (alo, ahi) = (a0.min(a1).min(a2), a0.max(a1).max(a2));
+                        let (blo, bhi) = (b0.min(b1).min(b2), b0.max(b1).max(b2));
+                        if (blo - ahi).max(alo - bhi) - self.slack >= best.d {
+                            continue;
+                        }
+                    }
+                }
+                let vb = *vb.get_or_insert_with(|| self.frame.triangle(&self.b.triangle(tb)).v);
+                self.counters.tri_tests += 1;
                 let (d, pa, pb) = if apart {
                     let (d2, pa, pb) = tri::triangle_features(&va, &vb);
                     (d2.sqrt(), pa, pb)
@@ -511,7 +669,7 @@ impl<'a> Query<'a> {
         let (ra, rb) = (self.a.root_node(), self.b.root_node());
         let pr = self.place(rb);
         let enough = tol.next_up();
-        if self.lower_bound(ra, &pr, enough) > tol {
+        if self.lower_bound(ra, rb, &pr, enough) > tol {
             return false;
         }
         let mut stack: Vec<(u32, u32)> = Vec::with_capacity(64);
@@ -520,9 +678,9 @@ impl<'a> Query<'a> {
         let mut kids_b: Vec<u32> = Vec::with_capacity(2);
         while let Some((na, nb)) = stack.pop() {
             kids_a.clear();
-            kids_a.extend(self.a.node_children(na));
+            kids_a.extend(self.kids_a(na));
             kids_b.clear();
-            kids_b.extend(self.b.node_children(nb));
+            kids_b.extend(self.kids_b(nb));
             if kids_a.is_empty() && kids_b.is_empty() {
                 for &tb in self.b.node_triangles(nb) {
                     let vb = self.b_triangle(tb);
@@ -545,22 +703,20 @@ impl<'a> Query<'a> {
             } else if kids_b.is_empty() {
                 true
             } else {
-                let sa = self.a.node_obb(na).half_extents.length_squared();
-                let sb = self.b.node_obb(nb).half_extents.length_squared();
-                sa >= sb
+                self.size_a(na) >= self.size_b(nb)
             };
             let mut children: [(u32, u32, f64); 4] = [(0, 0, 0.0); 4];
             let mut n = 0;
             if split_a {
                 let pb = self.place(nb);
                 for &ca in &kids_a {
-                    children[n] = (ca, nb, self.lower_bound(ca, &pb, enough));
+                    children[n] = (ca, nb, self.lower_bound(ca, nb, &pb, enough));
                     n += 1;
                 }
             } else {
                 for &cb in &kids_b {
                     let pb = self.place(cb);
-                    children[n] = (na, cb, self.lower_bound(na, &pb, enough));
+                    children[n] = (na, cb, self.lower_bound(na, cb, &pb, enough));
                     n += 1;
                 }
             }
