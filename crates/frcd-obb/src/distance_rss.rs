@@ -95,18 +95,8 @@ impl Rss {
 #[inline]
 pub(crate) fn lower_bound(a: &Rss, b: &Placed) -> (f64, DVec3) {
     let mut p = a.clamp(b.c);
-    let mut q = b.clamp(p);
+    let q = b.clamp(p);
     p = a.clamp(q);
-    if super::mode() & 16 != 0 {
-        q = b.clamp(p);
-        p = a.clamp(q);
-    }
-    if super::mode() & 8 != 0 {
-        q = b.clamp(p);
-        p = a.clamp(q);
-        q = b.clamp(p);
-        p = a.clamp(q);
-    }
     let n = q - p;
     let len2 = n.length_squared();
     if !(len2 > 0.0) || !len2.is_finite() {
@@ -121,6 +111,59 @@ pub(crate) fn lower_bound(a: &Rss, b: &Placed) -> (f64, DVec3) {
 #[inline]
 pub(crate) fn gap_along(a: &Rss, b: &Placed, n: DVec3) -> f64 {
     n.dot(b.c - a.c).abs() - a.extent(n) - b.extent(n) - a.r - b.r
+}
+
+/// The largest `n · x` over the vertices under `root` (computed dot products of actual
+/// vertices; every vertex not visited has an exact dot product at most the result plus
+/// `slack`): branch and bound on the volumes' support `n · c + a|n · u| + b|n · v| + r`.
+/// `+∞` (no bound) when more than `budget` nodes would be visited: a face perpendicular to
+/// `n` ties every vertex on it, and the certificate is not worth that walk.
+pub(crate) fn support(
+    nodes: &[DNode],
+    tree: &ObbTree,
+    root: u32,
+    n: DVec3,
+    slack: f64,
+    budget: u32,
+    stack: &mut Vec<(u32, f64)>,
+) -> f64 {
+    let ub = |id: u32| {
+        let v = &nodes[id as usize].rss;
+        n.dot(v.c) + v.extent(n) + v.r
+    };
+    let mut best = f64::NEG_INFINITY;
+    stack.clear();
+    stack.push((root, f64::INFINITY));
+    let mut visits = 0u32;
+    while let Some((id, bound)) = stack.pop() {
+        if bound + slack <= best {
+            continue;
+        }
+        visits += 1;
+        if visits > budget {
+            return f64::INFINITY;
+        }
+        let d = &nodes[id as usize];
+        if d.is_leaf() {
+            for &t in tree.node_triangles(id) {
+                for p in tree.triangle(t).v {
+                    best = best.max(n.dot(p));
+                }
+            }
+            continue;
+        }
+        let [k0, k1] = d.kids;
+        let (u0, u1) = (ub(k0), ub(k1));
+        // The child with the larger bound is visited first (pushed last).
+        if u0 >= u1 {
+            stack.push((k1, u1));
+            stack.push((k0, u0));
+        } else {
+            stack.push((k0, u0));
+            stack.push((k1, u1));
+        }
+    }
+    best
 }
 
 /// Builds one volume per node, indexed by node id.
@@ -310,11 +353,15 @@ mod tests {
         }
         assert!(checked > mesh.triangle_count() * 3);
         // Bounds against brute-force vertex distances for node pairs of two posed copies.
-        let m = DMat3::from_quat(DQuat::from_axis_angle(DVec3::new(1.0, 2.0, 3.0).normalize(), 0.7));
+        let m = DMat3::from_quat(DQuat::from_axis_angle(
+            DVec3::new(1.0, 2.0, 3.0).normalize(),
+            0.7,
+        ));
         let t = DVec3::new(2.1, 0.3, -0.2);
         for na in 0..40u32 {
             for nb in 0..40u32 {
-                let (lb, _) = lower_bound(&vols[na as usize].rss, &vols[nb as usize].rss.mapped(&m, t));
+                let (lb, _) =
+                    lower_bound(&vols[na as usize].rss, &vols[nb as usize].rss.mapped(&m, t));
                 let mut best = f64::INFINITY;
                 let (mut ua, mut ub) = (vec![na], vec![nb]);
                 let mut pa = Vec::new();
