@@ -386,4 +386,47 @@ mod tests {
             }
         }
     }
+
+    /// Parts apart (where the support certificate usually ends the search) and a concave part
+    /// whose closest points may lie in a concavity (where it must not): every answer within its
+    /// bound of the oracle, cold and warm-started.
+    #[test]
+    fn certified_early_ends_agree_with_the_oracle() {
+        use crate::distance::{DistanceCache, DistanceRequest, distance, distance_cached};
+        let knot = shapes::torus_knot(&shapes::TorusKnotParams {
+            tubular_segments: 48,
+            radial_segments: 6,
+            ..Default::default()
+        })
+        .expect("knot");
+        let ball = shapes::icosphere(0.3, 2);
+        let (ta, tb) = (
+            ObbTree::build(&knot, &BuildOptions::default()),
+            ObbTree::build(&ball, &BuildOptions::default()),
+        );
+        let mut cache = DistanceCache::new();
+        let mut k = 0u32;
+        for i in 0..24 {
+            let f = i as f64;
+            let dir = DVec3::new((f * 1.7).sin(), (f * 0.9).cos(), (f * 0.4).sin()).normalize();
+            // From inside the knot's hole (concave closest points) out to several sizes away.
+            let reach = 0.2 * f;
+            let pb = frcd_geom::Pose::new(dir * reach, DQuat::from_rotation_z(f));
+            let pa = frcd_geom::Pose::IDENTITY;
+            let o = crate::oracle::distance(&knot, &pa, &ball, &pb);
+            for d in [
+                distance(&ta, &pa, &tb, &pb, &DistanceRequest::default()),
+                distance_cached(&ta, &pa, &tb, &pb, &DistanceRequest::default(), &mut cache),
+            ] {
+                assert!(
+                    (d.distance - o.distance).abs() <= d.error_bound,
+                    "setup {i}: {} vs oracle {}",
+                    d.distance,
+                    o.distance
+                );
+                k += 1;
+            }
+        }
+        assert_eq!(k, 48);
+    }
 }
