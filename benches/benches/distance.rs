@@ -17,7 +17,11 @@
 //!
 //! Criterion times one query cycling through the 16 setups (`frcd/<pair>/<kind>`); before that
 //! the medians per query of frcd and parry3d-f64 are printed side by side (parry on the first 3
-//! setups only: it is two to three orders of magnitude slower), with their agreement. When
+//! setups only: it is two to three orders of magnitude slower), with their agreement and
+//! frcd's median work (volume pairs, triangle pairs). frcd's time per setup is the fastest of
+//! 7 windows of 1 ms (the machine is shared; preempted windows are dropped), the median over
+//! setups is printed. `FRCD_DISTANCE_NO_PARRY=1` times parry on one setup only,
+//! `FRCD_DISTANCE_DETAIL=1` prints every setup's time and work. When
 //! `FRCD_DISTANCE_EXPORT=DIR` is set, every pair's meshes and poses are written there as plain
 //! text, so a peer library run outside this repository can time the same queries.
 

@@ -499,10 +499,7 @@ impl<'a> Query<'a> {
         // The pair to expand next when it is no farther than the heap's top: the nearer child
         // of the pair just expanded usually is, and skips a push and a pop.
         let mut next = Some(Entry { lb, a: ra, b: rb });
-        loop {
-            let Some(Entry { lb, a: na, b: nb }) = next.take().or_else(|| heap.pop()) else {
-                break;
-            };
+        while let Some(Entry { lb, a: na, b: nb }) = next.take().or_else(|| heap.pop()) {
             if prune(lb, best.d) {
                 // Every other entry has a larger bound.
                 break;

@@ -99,7 +99,8 @@ pub(crate) fn lower_bound(a: &Rss, b: &Placed) -> (f64, DVec3) {
     p = a.clamp(q);
     let n = q - p;
     let len2 = n.length_squared();
-    if !(len2 > 0.0) || !len2.is_finite() {
+    // Also catches NaN (not finite).
+    if len2 <= 0.0 || !len2.is_finite() {
         return (-(a.r + b.r), DVec3::ZERO);
     }
     let proj = n.dot(b.c - a.c) - a.extent(n) - b.extent(n);
