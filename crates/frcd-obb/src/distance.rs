@@ -39,10 +39,13 @@
 //!    within `~6 ε M` of an exact point of its triangle, and the length adds `ε d`. Hence
 //!    `d >= d* - 13 ε M - ε d`.
 //! 2. *The true pair is not pruned.* A node pair is skipped only when a certified lower bound
-//!    on its boxes' distance is at least the best value: the boxes' separating-axis gaps minus a
-//!    slack of `1e-13 M ≈ 450 ε M`, which exceeds the rounding of the relative rotation, the
-//!    boxes' own containment slack and the projections. So the pair holding the true closest
-//!    points is evaluated, or the best value is already below it.
+//!    on the distance of its volumes (rectangle swept spheres, built lazily per tree: see
+//!    `distance_rss.rs`) is at least the best value: the volumes' separation along a direction
+//!    (the best pair's, or the rectangles' approximate closest-point direction) minus a slack
+//!    of `1e-13 M ≈ 450 ε M`, which exceeds the rounding of the relative rotation, the
+//!    volumes' own containment margin and the projections; a leaf's triangle pair is skipped on
+//!    the same rule with the triangles' own vertices. So the pair holding the true closest
+//!    points is evaluated, or the best value is already below it (or step 4 ended the search).
 //! 3. *The true pair's candidate is accurate.* For the closest features, the clamped
 //!    parameters differ from the exact ones by rounding of their numerators and denominators;
 //!    the distance is stationary at the exact parameters, so the value moves by `~16 ε M` for
@@ -52,6 +55,13 @@
 //!    small angle `φ` by `1/φ` (the common perpendicular's feet); near-parallel edges are also
 //!    caught by the endpoint candidates, so the loss is at most `~sqrt(ε) L` in the worst case.
 //!    CAD meshes rarely put the closest pair there, and [`within`] is exact in every case.
+//! 4. *Early end (support certificate).* When the best pair improves, with `n` its unit
+//!    direction, `L = min_B n · y - max_A n · x` over the meshes' vertices (found by branch and
+//!    bound on the volumes) bounds the distance from below; less `32 ε M` for the rounding of
+//!    the dot products, of `n`'s length and of B's mapping, it is certified. The search stops
+//!    when `best <= L + 48 ε M`, so then `d* - 13 ε M <= d <= d* + 48 ε M` whatever the
+//!    conditioning. This ends most searches between parts apart, whose closest points usually
+//!    lie on both convex hulls (then `L` equals the distance).
 //!
 //! With `rel_err`, `abs_err > 0` a node pair is also skipped when its lower bound `lb` gives
 //! `lb (1 + rel_err) >= best` or `lb + abs_err >= best` (PQP's rule), so
@@ -59,13 +69,15 @@
 
 #[path = "distance_exact.rs"]
 mod exact;
+#[path = "distance_rss.rs"]
+pub(crate) mod rss;
 #[path = "distance_tri.rs"]
 mod tri;
 
 use crate::query::RelativeFrame;
 use crate::tree::ObbTree;
 use exact::{Stage, triangles_within};
-use frcd_geom::{DMat3, DVec3, Obb, Pose};
+use frcd_geom::{DVec3, Obb, Pose};
 use std::collections::BinaryHeap;
 use tri::triangle_distance;
 
@@ -236,7 +248,9 @@ fn run_distance(
             }
         }
     }
-    if best.d > 0.0 {
+    q.rel = rel;
+    q.abs = abs;
+    if best.d > 0.0 && !(best.d.is_finite() && q.certify(&best)) {
         q.search(&mut best, rel, abs);
     }
     if limit.is_finite() && best.pa.is_nan() {
@@ -329,25 +343,43 @@ impl Ord for Entry {
     }
 }
 
-/// A box of B mapped into A's frame.
-#[derive(Clone, Copy)]
-struct Placed {
-    axes: DMat3,
-    center: DVec3,
-    half: DVec3,
-}
-
 struct Query<'a> {
     a: &'a ObbTree,
     b: &'a ObbTree,
+    va: &'a [rss::DNode],
+    vb: &'a [rss::DNode],
     frame: RelativeFrame,
     /// Certified slack subtracted from every box lower bound.
     slack: f64,
     magnitude: f64,
     /// Unit direction between the best closest points so far (A's frame).
     dir: Option<DVec3>,
+    /// `dir` mapped into B's frame, and its offset: `dir · (m x + t) = dir_b · x + dir_t`.
+    dir_b: DVec3,
+    dir_t: f64,
+    /// Set when a support certificate proved the best pair optimal (the search stops).
+    proven: bool,
+    /// Certificate attempts left in this query.
+    certify_left: u32,
+    /// Scratch stack of the support searches.
+    support_stack: Vec<(u32, f64)>,
+    /// The caller's error allowances (for the certificate).
+    rel: f64,
+    abs: f64,
     counters: DistanceCounters,
 }
+
+/// Rounding allowance of the support certificate's lower bound (see `Query::certify`).
+const CERT_SLACK: f64 = 32.0 * f64::EPSILON * 0.5;
+/// How far above the certificate's (slackened) bound an answer may be accepted: the answer is
+/// then within `48 ε M` above the true distance, inside the documented `64 ε M`.
+const CERT_STOP: f64 = 48.0 * f64::EPSILON * 0.5;
+
+/// Support certificates tried per query, and the nodes each support search may visit: they
+/// bound what a query that cannot be certified (closest points in a concavity, or a face
+/// perpendicular to the direction) pays for trying.
+const CERTIFY_TRIES: u32 = 64;
+const SUPPORT_BUDGET: u32 = 4096;
 
 /// Relative slack of the box lower bounds (see the module docs, step 2).
 const SLACK_REL: f64 = 1e-13;
@@ -378,10 +410,19 @@ impl<'a> Query<'a> {
         Query {
             a,
             b,
+            va: a.distance_volumes(),
+            vb: b.distance_volumes(),
             frame,
             slack: SLACK_REL * magnitude,
             magnitude,
             dir: None,
+            dir_b: DVec3::ZERO,
+            dir_t: 0.0,
+            proven: false,
+            certify_left: CERTIFY_TRIES,
+            support_stack: Vec::new(),
+            rel: 0.0,
+            abs: 0.0,
             counters: DistanceCounters::default(),
         }
     }
@@ -391,21 +432,53 @@ impl<'a> Query<'a> {
     }
 
     #[inline]
-    fn place(&self, nb: u32) -> Placed {
-        let o = self.b.node_obb(nb);
-        Placed {
-            axes: self.frame.m * o.axes,
-            center: self.frame.m * o.center + self.frame.t,
-            half: o.half_extents,
-        }
+    fn place(&self, nb: u32) -> rss::Placed {
+        self.vb[nb as usize].rss.mapped(&self.frame.m, self.frame.t)
     }
 
-    /// A certified lower bound on the distance between A's node box and B's placed box
-    /// (negative when they may overlap, see [`box_lower_bound`]).
+    /// A certified lower bound on the distance between A's node volume and B's placed volume
+    /// (negative when they may overlap): the larger of the volumes' separations along the best
+    /// pair's direction and along the rectangles' approximate closest-point direction
+    /// ([`rss::lower_bound`]), less the slack.
     #[inline]
-    fn lower_bound(&mut self, na: u32, pb: &Placed, enough: f64) -> f64 {
+    fn lower_bound(&mut self, na: u32, pb: &rss::Placed, enough: f64) -> f64 {
         self.counters.box_tests += 1;
-        box_lower_bound(&self.a.node_obb(na), pb, self.slack, enough, self.dir)
+        let va = &self.va[na as usize].rss;
+        // The best pair's direction first: at range every pair near the closest region is
+        // separated along it, and it costs a few products (no dependent chain).
+        let mut g = f64::NEG_INFINITY;
+        if let Some(n) = self.dir {
+            g = rss::gap_along(va, pb, n) - self.slack;
+            if g >= enough {
+                return g;
+            }
+        }
+        let (r, _) = rss::lower_bound(va, pb);
+        g.max(r - self.slack)
+    }
+
+    /// Children of A's node (none for a leaf).
+    #[inline(always)]
+    fn kids_a(&self, n: u32) -> impl Iterator<Item = u32> {
+        let d = &self.va[n as usize];
+        d.kids.into_iter().take(if d.is_leaf() { 0 } else { 2 })
+    }
+    #[inline(always)]
+    fn kids_b(&self, n: u32) -> impl Iterator<Item = u32> {
+        let d = &self.vb[n as usize];
+        d.kids.into_iter().take(if d.is_leaf() { 0 } else { 2 })
+    }
+
+    /// Squared size of a node's volume (which node of a pair to split).
+    #[inline]
+    fn size_a(&self, n: u32) -> f64 {
+        let v = &self.va[n as usize].rss;
+        v.a * v.a + v.b * v.b + v.r * v.r
+    }
+    #[inline]
+    fn size_b(&self, n: u32) -> f64 {
+        let v = &self.vb[n as usize].rss;
+        v.a * v.a + v.b * v.b + v.r * v.r
     }
 
     fn b_triangle(&self, t: u32) -> [DVec3; 3] {
@@ -423,67 +496,146 @@ impl<'a> Query<'a> {
         let pr = self.place(rb);
         let lb = self.lower_bound(ra, &pr, f64::INFINITY);
         let mut heap: BinaryHeap<Entry> = BinaryHeap::with_capacity(256);
-        heap.push(Entry { lb, a: ra, b: rb });
-        let mut kids_a: Vec<u32> = Vec::with_capacity(2);
-        let mut kids_b: Vec<u32> = Vec::with_capacity(2);
-        while let Some(Entry { lb, a: na, b: nb }) = heap.pop() {
+        // The pair to expand next when it is no farther than the heap's top: the nearer child
+        // of the pair just expanded usually is, and skips a push and a pop.
+        let mut next = Some(Entry { lb, a: ra, b: rb });
+        while let Some(Entry { lb, a: na, b: nb }) = next.take().or_else(|| heap.pop()) {
             if prune(lb, best.d) {
                 // Every other entry has a larger bound.
                 break;
             }
-            kids_a.clear();
-            kids_a.extend(self.a.node_children(na));
-            kids_b.clear();
-            kids_b.extend(self.b.node_children(nb));
-            if kids_a.is_empty() && kids_b.is_empty() {
+            let (leaf_a, leaf_b) = (
+                self.va[na as usize].is_leaf(),
+                self.vb[nb as usize].is_leaf(),
+            );
+            if leaf_a && leaf_b {
                 // A positive certified bound: the triangles cannot touch, skip the exact test.
                 self.leaf_pair(na, nb, best, lb > 0.0);
-                if best.d == 0.0 {
+                if best.d == 0.0 || self.proven {
                     return;
                 }
                 continue;
             }
             // Split the larger node (or the one that is not a leaf).
-            let split_a = if kids_a.is_empty() {
-                false
-            } else if kids_b.is_empty() {
-                true
-            } else {
-                let sa = self.a.node_obb(na).half_extents.length_squared();
-                let sb = self.b.node_obb(nb).half_extents.length_squared();
-                sa >= sb
-            };
+            let split_a = !leaf_a && (leaf_b || self.size_a(na) >= self.size_b(nb));
+            let mut e = [Entry {
+                lb: 0.0,
+                a: 0,
+                b: 0,
+            }; 2];
             if split_a {
                 let pb = self.place(nb);
-                for &ca in &kids_a {
+                for (k, ca) in self.va[na as usize].kids.into_iter().enumerate() {
                     let lb = self.lower_bound(ca, &pb, enough(best.d));
-                    if !prune(lb, best.d) {
-                        heap.push(Entry { lb, a: ca, b: nb });
-                    }
+                    e[k] = Entry { lb, a: ca, b: nb };
                 }
             } else {
-                for &cb in &kids_b {
+                for (k, cb) in self.vb[nb as usize].kids.into_iter().enumerate() {
                     let pb = self.place(cb);
                     let lb = self.lower_bound(na, &pb, enough(best.d));
-                    if !prune(lb, best.d) {
-                        heap.push(Entry { lb, a: na, b: cb });
-                    }
+                    e[k] = Entry { lb, a: na, b: cb };
+                }
+            }
+            if e[1].lb < e[0].lb {
+                e.swap(0, 1);
+            }
+            for (k, x) in e.into_iter().enumerate() {
+                if prune(x.lb, best.d) {
+                    break; // sorted: the other is farther still
+                }
+                if k == 0 && heap.peek().is_none_or(|t| x.lb <= t.lb) {
+                    next = Some(x);
+                } else {
+                    heap.push(x);
                 }
             }
         }
     }
 
+    /// Support certificate: with `n` the best pair's direction, every point of A projects on
+    /// `n` at most `max_A n · x` and every point of B at least `min_B n · y`, so their
+    /// difference `L` bounds the distance from below (the meshes' convex hulls are that far
+    /// apart along `n`). When the best pair lies on both hulls facing each other (the usual
+    /// case for parts apart), `L` equals its distance and the search can stop: nothing is
+    /// closer. Rounding: the dot products of vertices (`|x| <= M`), the unit length of `n` and
+    /// B's mapping each add a few `ε M`; `CERT_SLACK` covers them, and the stop rule allows the
+    /// answer to exceed `L` by `CERT_STOP` (both inside the documented `64 ε M`).
+    fn certify(&mut self, best: &Best) -> bool {
+        let Some(n) = self.dir else {
+            return false;
+        };
+        if self.certify_left == 0 {
+            return false;
+        }
+        self.certify_left -= 1;
+        self.counters.box_tests += 1;
+        // No slack in the support searches: the rounding of a skipped node's bound (a few
+        // `ε M`) is part of `CERT_SLACK`.
+        let slack = 0.0;
+        let sa = rss::support(
+            self.va,
+            self.a,
+            self.a.root_node(),
+            n,
+            slack,
+            SUPPORT_BUDGET,
+            &mut self.support_stack,
+        );
+        let sb = rss::support(
+            self.vb,
+            self.b,
+            self.b.root_node(),
+            -self.dir_b,
+            slack,
+            SUPPORT_BUDGET,
+            &mut self.support_stack,
+        );
+        // min over B of n · y = dir_t - max over B of (-dir_b) · y.
+        let l = (self.dir_t - sb) - sa - CERT_SLACK * self.magnitude;
+        let proven = l + CERT_STOP * self.magnitude >= best.d
+            || l * (1.0 + self.rel) >= best.d
+            || l + self.abs >= best.d;
+        self.proven |= proven;
+        proven
+    }
+
     fn set_dir(&mut self, pa: DVec3, pb: DVec3, d: f64) {
         let n = (pb - pa) / d;
         self.dir = (d > 0.0 && n.is_finite()).then_some(n);
+        if let Some(n) = self.dir {
+            // n · (m x + t) = (mᵀ n) · x + n · t for B's local points x.
+            self.dir_b = self.frame.m.transpose() * n;
+            self.dir_t = n.dot(self.frame.t);
+        }
     }
 
     fn leaf_pair(&mut self, na: u32, nb: u32, best: &mut Best, apart: bool) {
         for &tb in self.b.node_triangles(nb) {
-            let vb = self.b_triangle(tb);
+            let lb_tri = self.b.triangle(tb).v;
+            let mut vb: Option<[DVec3; 3]> = None;
             for &ta in self.a.node_triangles(na) {
-                self.counters.tri_tests += 1;
                 let va = self.a.triangle(ta).v;
+                if apart {
+                    // Leaf short-cut: the triangles' separation along the best direction so far
+                    // (a certified lower bound up to the slack) often already prunes at range.
+                    // B's triangle is projected in its own frame (`dir_b`, `dir_t`: the
+                    // direction mapped back), so a pruned pair costs no mapping.
+                    if let Some(n) = self.dir {
+                        let (a0, a1, a2) = (n.dot(va[0]), n.dot(va[1]), n.dot(va[2]));
+                        let (b0, b1, b2) = (
+                            self.dir_b.dot(lb_tri[0]) + self.dir_t,
+                            self.dir_b.dot(lb_tri[1]) + self.dir_t,
+                            self.dir_b.dot(lb_tri[2]) + self.dir_t,
+                        );
+                        let (alo, ahi) = (a0.min(a1).min(a2), a0.max(a1).max(a2));
+                        let (blo, bhi) = (b0.min(b1).min(b2), b0.max(b1).max(b2));
+                        if (blo - ahi).max(alo - bhi) - self.slack >= best.d {
+                            continue;
+                        }
+                    }
+                }
+                let vb = *vb.get_or_insert_with(|| self.frame.triangle(&self.b.triangle(tb)).v);
+                self.counters.tri_tests += 1;
                 let (d, pa, pb) = if apart {
                     let (d2, pa, pb) = tri::triangle_features(&va, &vb);
                     (d2.sqrt(), pa, pb)
@@ -501,6 +653,9 @@ impl<'a> Query<'a> {
                         return;
                     }
                     self.set_dir(pa, pb, d);
+                    if self.certify(best) {
+                        return;
+                    }
                 }
             }
         }
@@ -520,9 +675,9 @@ impl<'a> Query<'a> {
         let mut kids_b: Vec<u32> = Vec::with_capacity(2);
         while let Some((na, nb)) = stack.pop() {
             kids_a.clear();
-            kids_a.extend(self.a.node_children(na));
+            kids_a.extend(self.kids_a(na));
             kids_b.clear();
-            kids_b.extend(self.b.node_children(nb));
+            kids_b.extend(self.kids_b(nb));
             if kids_a.is_empty() && kids_b.is_empty() {
                 for &tb in self.b.node_triangles(nb) {
                     let vb = self.b_triangle(tb);
@@ -545,9 +700,7 @@ impl<'a> Query<'a> {
             } else if kids_b.is_empty() {
                 true
             } else {
-                let sa = self.a.node_obb(na).half_extents.length_squared();
-                let sb = self.b.node_obb(nb).half_extents.length_squared();
-                sa >= sb
+                self.size_a(na) >= self.size_b(nb)
             };
             let mut children: [(u32, u32, f64); 4] = [(0, 0, 0.0); 4];
             let mut n = 0;
@@ -574,104 +727,4 @@ impl<'a> Query<'a> {
         }
         false
     }
-}
-
-/// Lower bound on the distance between two boxes from 16 axes (the centre-to-centre direction
-/// and the 15 separating axes): for a unit direction `u`, the gap between the boxes'
-/// projections bounds their distance from below. The largest gap over these directions
-/// (the edge cross products normalised), each reduced by
-/// `slack` before normalising. Negative when the boxes may overlap (callers treat it as 0 for
-/// pruning and use it to visit deeper overlaps first). Returns as soon as an axis reaches
-/// `enough` (the caller prunes at that value anyway). Cross axes with `|a_i × b_j|² < 1e-6` are skipped:
-/// they are within 1e-3 rad of a face axis, and their normalisation would amplify rounding.
-#[inline]
-fn box_lower_bound(a: &Obb, b: &Placed, slack: f64, enough: f64, dir: Option<DVec3>) -> f64 {
-    let at = a.axes.transpose();
-    let rm = at * b.axes; // column j = A^T B_j: R[i][j] = rm.col(j)[i]
-    let t = at * (b.center - a.center);
-    let c = [rm.x_axis, rm.y_axis, rm.z_axis];
-    let mut r = [[0.0f64; 3]; 3];
-    let mut ar = [[0.0f64; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            r[i][j] = c[j][i];
-            ar[i][j] = c[j][i].abs() + 1e-14;
-        }
-    }
-    let ea = a.half_extents;
-    let eb = b.half;
-    // Signed: negative when every axis overlaps (then the least overlap, a depth-like value
-    // that orders overlapping pairs deepest first).
-    let mut gap = f64::NEG_INFINITY;
-    // The centre-to-centre direction first: nearly tight for boxes far apart compared with their
-    // size, where the 15 SAT axes can underestimate the distance by up to a factor sqrt(3).
-    let tl = t.length();
-    if tl > 0.0 {
-        let u = t / tl;
-        let rad_a = ea.x * u.x.abs() + ea.y * u.y.abs() + ea.z * u.z.abs();
-        let mut rad_b = 0.0;
-        for j in 0..3 {
-            // |B_j · u|, with R's rounding (a few ε per entry) covered by 3e-14.
-            rad_b += eb[j] * ((r[0][j] * u.x + r[1][j] * u.y + r[2][j] * u.z).abs() + 3e-14);
-        }
-        // u itself is unit only up to a few ε: its error moves the projections by ε·|t|,
-        // covered by the slack like every other rounding of size ε M.
-        gap = gap.max(tl - rad_a - rad_b - slack);
-        if gap >= enough {
-            return gap;
-        }
-    }
-    // The direction of the best closest pair so far (A's frame, unit): node pairs around the
-    // closest region are separated along it.
-    if let Some(n) = dir {
-        let proj = (b.center - a.center).dot(n).abs();
-        let rad_a = (at * n).abs().dot(ea);
-        let rad_b = (b.axes.transpose() * n).abs().dot(eb);
-        gap = gap.max(proj - rad_a - rad_b - slack);
-        if gap >= enough {
-            return gap;
-        }
-    }
-    // A's faces.
-    for i in 0..3 {
-        let g = t[i].abs() - (ea[i] + eb[0] * ar[i][0] + eb[1] * ar[i][1] + eb[2] * ar[i][2]);
-        gap = gap.max(g - slack);
-    }
-    // B's faces.
-    for j in 0..3 {
-        let proj = (t[0] * r[0][j] + t[1] * r[1][j] + t[2] * r[2][j]).abs();
-        let g = proj - (ea[0] * ar[0][j] + ea[1] * ar[1][j] + ea[2] * ar[2][j] + eb[j]);
-        gap = gap.max(g - slack);
-    }
-    if gap >= enough {
-        return gap;
-    }
-    // Edge cross products a_i x b_j, normalised (the square root only when the axis can win).
-    for i in 0..3 {
-        let (i1, i2) = ((i + 1) % 3, (i + 2) % 3);
-        for j in 0..3 {
-            let (j1, j2) = ((j + 1) % 3, (j + 2) % 3);
-            let proj = (t[i2] * r[i1][j] - t[i1] * r[i2][j]).abs();
-            let rad =
-                ea[i1] * ar[i2][j] + ea[i2] * ar[i1][j] + eb[j1] * ar[i][j2] + eb[j2] * ar[i][j1];
-            // The slack covers the rounding of the unnormalised gap: subtract it first.
-            let g = proj - rad - slack;
-            if g <= 0.0 {
-                continue;
-            }
-            let rij = r[i][j];
-            let len2 = 1.0 - rij * rij;
-            // |L| <= 1, so g / |L| >= g: only axes with g·g > gap²·|L|² can raise a positive
-            // bound.
-            if len2 < 1e-6 || (gap > 0.0 && g * g <= gap * gap * len2) {
-                continue;
-            }
-            // len2 carries ~ε/1e-6 relative error: grow the divisor to stay a lower bound.
-            gap = g / (len2.sqrt() * (1.0 + 1e-9));
-            if gap >= enough {
-                return gap;
-            }
-        }
-    }
-    gap
 }

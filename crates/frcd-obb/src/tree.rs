@@ -91,6 +91,9 @@ pub struct ObbTree {
     pub(crate) uid: u64,
     /// Every edge has an even number of incident triangles (parity tests are meaningful).
     pub(crate) closed: bool,
+    /// Distance volumes (one rectangle swept sphere per node), built on the first distance or
+    /// tolerance query (`crate::distance`), so collision-only users pay no memory.
+    pub(crate) distance_volumes: std::sync::OnceLock<Vec<crate::distance::rss::DNode>>,
 }
 
 impl ObbTree {
@@ -154,6 +157,7 @@ impl ObbTree {
             closed: mesh.topology().is_closed(),
             uid: NEXT_UID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
             mesh,
+            distance_volumes: std::sync::OnceLock::new(),
         }
     }
 }
