@@ -399,13 +399,15 @@ pub fn check(run: &CheckRun) -> Result<()> {
         Some(c) => run.first.saturating_add(c).min(n),
         None => n,
     };
-    let (options, cost_source) = options_of(&run.checker, run.segments, run.quiet)?;
+    let (mut options, cost_source) = options_of(&run.checker, run.segments, run.quiet)?;
     let mode = options.mode;
     let solid = options.solid;
     let t_setup = Instant::now();
-    let build = options.build;
+    let mut clearance = crate::clearance_run::ClearanceRun::new(&scene, &run.clearance)?;
+    if let Some(c) = &clearance {
+        c.apply(&mut options);
+    }
     let checker = make_checker(&scene, options)?;
-    let mut clearance = crate::clearance_run::ClearanceRun::new(&scene, &run.clearance, &build)?;
     let setup_ms = t_setup.elapsed().as_secs_f64() * 1e3;
     let mut notes: Vec<String> = checker.notes().iter().map(|n| term(n)).collect();
     notes.extend(mesh_notes(&scene, solid));
@@ -429,10 +431,10 @@ pub fn check(run: &CheckRun) -> Result<()> {
         let r = checker
             .check(poses, &mut state)
             .with_context(|| format!("frame {index}"))?;
-        if let Some(c) = clearance.as_mut() {
-            c.frame(poses, &r);
-        }
         let time_us = t.elapsed().as_secs_f64() * 1e6;
+        if let Some(c) = clearance.as_mut() {
+            c.frame(&r);
+        }
         for (tally, s) in tallies.iter_mut().zip(&r.stages) {
             tally.add(s.backend, s.time_us);
         }
@@ -527,7 +529,7 @@ pub fn check(run: &CheckRun) -> Result<()> {
             }
         }
         if let Some(c) = &clearance {
-            c.print(&report, total);
+            c.print(&report);
         }
     }
     if let (Some(c), Some(path)) = (&clearance, &run.clearance.plot) {

@@ -280,6 +280,7 @@ impl Checker {
                         (false, false) => Plan::ClearanceOnly,
                     },
                     time_us: 0.0,
+                    clearance_work: frcd_obb::ClearanceWork::default(),
                 }
             })
             .collect();
@@ -341,6 +342,7 @@ impl Checker {
                     },
                 });
             }
+            result.clearance_work += job.clearance_work;
             if let Some(c) = out.clearance {
                 let c: PairClearance = c.with_ids(a, b);
                 result.clearances.push(c);

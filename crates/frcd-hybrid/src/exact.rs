@@ -97,7 +97,7 @@ impl Checker {
         };
         let mut outcome = outcome;
         if let Some(t) = job.threshold {
-            outcome.clearance = frcd_obb::pair_clearance(
+            (outcome.clearance, job.clearance_work) = frcd_obb::pair_clearance_cached(
                 ta,
                 pa,
                 tb,
@@ -105,6 +105,7 @@ impl Checker {
                 t,
                 outcome.pairs.first().copied(),
                 outcome.collide(),
+                &mut job.state.clearance,
             );
         }
         job.plan = Plan::Cpu;
@@ -187,4 +188,6 @@ pub(crate) struct Job {
     pub(crate) state: PairState,
     pub(crate) plan: Plan,
     pub(crate) time_us: f64,
+    /// Work of this frame's clearance evaluation.
+    pub(crate) clearance_work: frcd_obb::ClearanceWork,
 }
