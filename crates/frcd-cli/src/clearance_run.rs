@@ -47,7 +47,7 @@ impl ClearanceRun {
         if clearances.is_empty() {
             if args.plot.is_some() {
                 bail!(
-                    "--plot-clearance needs a clearance threshold: give --clearance METRES or set \"clearance\" in the scene"
+                    "the clearance plot needs a clearance threshold: give --clearance METRES or set \"clearance\" in the scene"
                 );
             }
             return Ok(None);

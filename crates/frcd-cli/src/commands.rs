@@ -25,6 +25,8 @@ pub struct CheckRun {
     pub pair_times: bool,
     pub pairs: bool,
     pub clearance: crate::clearance_run::ClearanceArgs,
+    /// `frcd plot-clearance`: print only the clearance summary (and write the plot).
+    pub plot_only: bool,
 }
 
 fn load_scene(path: &Path, args: &CheckerArgs) -> Result<Scene> {
@@ -373,7 +375,14 @@ pub fn check(run: &CheckRun) -> Result<()> {
         outputs.push(("--csv", p));
     }
     if let Some(p) = &run.clearance.plot {
-        outputs.push(("--plot-clearance", p));
+        outputs.push((
+            if run.plot_only {
+                "--output"
+            } else {
+                "--plot-clearance"
+            },
+            p,
+        ));
     }
     if let Some(t) = run.clearance.threshold {
         frcd_io::check_clearance(t).map_err(|m| anyhow::anyhow!("--clearance: {m}"))?;
@@ -456,7 +465,7 @@ pub fn check(run: &CheckRun) -> Result<()> {
     times.sort_by(f64::total_cmp);
     let median = percentile(&times, 0.5);
     let name = |i: usize| term(checker.body_name(i).unwrap_or("?"));
-    if !run.quiet {
+    if !run.quiet && !run.plot_only {
         println!(
             "{}: {} bodies, {} triangles, frames {}..={} ({} checked); backend {}, mode {}, cost model {}",
             term(&run.scene.display().to_string()),
@@ -528,6 +537,8 @@ pub fn check(run: &CheckRun) -> Result<()> {
                 );
             }
         }
+    }
+    if !run.quiet {
         if let Some(c) = &clearance {
             c.print(&report);
         }

@@ -339,3 +339,51 @@ fn bogie_cached_clearance_equals_fresh_on_every_frame() {
     assert!(reported > scene.frame_count(), "{reported}");
     println!("bogie clearance work with temporal state: {work:?}");
 }
+
+/// `frcd plot-clearance`: the same plot as `check --plot-clearance` (one code path), the
+/// per-pair minima printed, nothing else; a threshold is required.
+#[test]
+fn plot_clearance_subcommand_writes_the_same_svg() {
+    let dir = tempdir("plotcmd");
+    scene(&dir, "");
+    let o = frcd(
+        &[
+            "check",
+            "scene.json",
+            "--backend",
+            "cpu",
+            "--clearance",
+            "0.005",
+            "--plot-clearance",
+            "check.svg",
+        ],
+        &dir,
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let o = frcd(
+        &[
+            "plot-clearance",
+            "scene.json",
+            "--backend",
+            "cpu",
+            "--clearance",
+            "0.005",
+            "-o",
+            "plot.svg",
+        ],
+        &dir,
+    );
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("a / b: min 0.000000 at frame 1"), "{t}");
+    assert!(out.contains("clearance of 2 pairs plotted"), "{t}");
+    assert!(!out.contains("time per frame"), "{t}");
+    let a = std::fs::read_to_string(dir.join("check.svg")).unwrap();
+    let b = std::fs::read_to_string(dir.join("plot.svg")).unwrap();
+    assert!(b.starts_with("<svg") && b.contains("a / b"), "{b}");
+    assert_eq!(a, b);
+    let o = frcd(&["plot-clearance", "scene.json", "-o", "x.svg"], &dir);
+    assert_clean_failure(&o, "needs a clearance threshold");
+    assert!(!dir.join("x.svg").exists());
+}
