@@ -226,6 +226,14 @@ fn mode_of(m: ModeArg) -> Mode {
     }
 }
 
+fn fit_of(f: crate::FitArg) -> frcd_obb::FitMethod {
+    match f {
+        crate::FitArg::Vertex => frcd_obb::FitMethod::VertexCovariance,
+        crate::FitArg::Area => frcd_obb::FitMethod::AreaWeighted,
+        crate::FitArg::Hull => frcd_obb::FitMethod::HullSurface,
+    }
+}
+
 fn options_of(args: &CheckerArgs, segments: bool, quiet: bool) -> Result<(Options, String)> {
     if !(16..=4096).contains(&args.resolution) {
         bail!("--resolution {} is outside 16..=4096", args.resolution);
@@ -239,13 +247,13 @@ fn options_of(args: &CheckerArgs, segments: bool, quiet: bool) -> Result<(Option
             image_resolution: args.resolution,
             cost,
             build: frcd_obb::BuildOptions {
-                fit: match args.fit {
-                    crate::FitArg::Vertex => frcd_obb::FitMethod::VertexCovariance,
-                    crate::FitArg::Area => frcd_obb::FitMethod::AreaWeighted,
-                    crate::FitArg::Hull => frcd_obb::FitMethod::HullSurface,
-                },
+                fit: fit_of(args.fit),
                 max_leaf_triangles: args.leaf.max(1),
             },
+            clearance_build: Some(frcd_obb::BuildOptions {
+                fit: fit_of(args.fit),
+                max_leaf_triangles: args.clearance_leaf.max(1),
+            }),
             ..Options::default()
         },
         source,

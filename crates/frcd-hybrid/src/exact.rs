@@ -98,9 +98,9 @@ impl Checker {
         let mut outcome = outcome;
         if let Some(t) = job.threshold {
             (outcome.clearance, job.clearance_work) = frcd_obb::pair_clearance_cached(
-                ta,
+                &self.clearance_trees[self.bodies[ia].mesh],
                 pa,
-                tb,
+                &self.clearance_trees[self.bodies[ib].mesh],
                 pb,
                 t,
                 outcome.pairs.first().copied(),
