@@ -1,15 +1,12 @@
 //! Clearance over a `frcd check` run: thresholds from the scene and `--clearance`, the records
 //! of every frame, the text summary, the JSON and CSV additions and the SVG plot.
 
-use crate::clearance::{Thresholds, Work, frame_clearances};
 use crate::commands::term;
 use anyhow::{Context, Result, bail};
-use frcd_geom::Pose;
-use frcd_hybrid::FrameResult;
-use frcd_io::{ClearanceRecord, ClearanceSummary, Report, Scene};
-use frcd_obb::ObbTree;
+use frcd_hybrid::{FrameResult, Options};
+use frcd_io::{ClearanceRecord, ClearanceSummary, Clearances, Report, Scene};
+use frcd_obb::ClearanceWork;
 use std::path::Path;
-use std::time::Instant;
 
 /// Clearance options of `frcd check`.
 #[derive(Clone, Debug, Default)]
@@ -24,30 +21,22 @@ pub struct ClearanceArgs {
     pub plot_points: usize,
 }
 
-/// The clearance state of one run.
+/// The clearance state of one run: the thresholds (given to the checker, which computes the
+/// clearances) and the records of every frame.
 pub struct ClearanceRun {
-    thresholds: Thresholds,
+    clearances: Clearances,
     names: Vec<String>,
-    /// Per body, its tree (one per distinct mesh, shared).
-    body_tree: Vec<usize>,
-    trees: Vec<ObbTree>,
     /// Per frame checked, its records.
     pub frames: Vec<Vec<ClearanceRecord>>,
-    /// Total time of the clearance computation (µs), included in the frame times.
-    pub total_us: f64,
     /// Summed work counters.
-    pub work: Work,
+    pub work: ClearanceWork,
 }
 
 impl ClearanceRun {
-    /// The run's thresholds (`--clearance` replaces the scene-wide one; per-pair ones stay), and
-    /// the trees; `None` when no pair has a threshold. The threshold is checked like the
-    /// scene's (finite, `>= 0`).
-    pub fn new(
-        scene: &Scene,
-        args: &ClearanceArgs,
-        build: &frcd_obb::BuildOptions,
-    ) -> Result<Option<Self>> {
+    /// The run's thresholds (`--clearance` replaces the scene-wide one; per-pair ones stay);
+    /// `None` when no pair has a threshold. The threshold is checked like the scene's (finite,
+    /// `>= 0`).
+    pub fn new(scene: &Scene, args: &ClearanceArgs) -> Result<Option<Self>> {
         let cli = args
             .threshold
             .map(|t| frcd_io::check_clearance(t).map_err(|m| anyhow::anyhow!("--clearance: {m}")))
@@ -58,55 +47,29 @@ impl ClearanceRun {
         if clearances.is_empty() {
             if args.plot.is_some() {
                 bail!(
-                    "--plot-clearance needs a clearance threshold: give --clearance METRES or set \"clearance\" in the scene"
+                    "the clearance plot needs a clearance threshold: give --clearance METRES or set \"clearance\" in the scene"
                 );
             }
             return Ok(None);
         }
-        let trees: Vec<ObbTree> = scene
-            .meshes()
-            .iter()
-            .map(|m| ObbTree::build(m, build))
-            .collect();
         Ok(Some(Self {
-            thresholds: Thresholds {
-                clearances,
-                excluded: scene.exclusions().iter().copied().collect(),
-                is_static: scene.bodies().iter().map(|b| b.is_static).collect(),
-            },
+            clearances,
             names: scene.bodies().iter().map(|b| b.name.clone()).collect(),
-            body_tree: scene.bodies().iter().map(|b| b.mesh_index).collect(),
-            trees,
             frames: Vec::new(),
-            total_us: 0.0,
-            work: Work::default(),
+            work: ClearanceWork::default(),
         }))
     }
 
-    /// Computes and stores one frame's clearances; the checker's answer gives the contained
-    /// pairs (distance 0).
-    pub fn frame(&mut self, poses: &[Pose], r: &FrameResult) {
-        let t = Instant::now();
-        let contained: Vec<(usize, usize)> = r
-            .contacts
-            .iter()
-            .filter(|c| c.contained.is_some())
-            .map(|c| (c.a.min(c.b), c.a.max(c.b)))
-            .collect();
-        let touching: Vec<(usize, usize, u32, u32)> = r
-            .contacts
-            .iter()
-            .filter(|c| c.a < c.b)
-            .filter_map(|c| c.pairs.first().map(|&(x, y)| (c.a, c.b, x, y)))
-            .collect();
-        let trees: Vec<&ObbTree> = self.body_tree.iter().map(|&m| &self.trees[m]).collect();
-        let (records, work) =
-            frame_clearances(&trees, poses, &self.thresholds, &contained, &touching);
-        self.work.candidates += work.candidates;
-        self.work.distance_queries += work.distance_queries;
-        self.work.exact_decisions += work.exact_decisions;
+    /// Asks the checker for the run's clearances.
+    pub fn apply(&self, options: &mut Options) {
+        crate::clearance::apply(&self.clearances, options);
+    }
+
+    /// Stores one frame's clearances, as the checker found them.
+    pub fn frame(&mut self, r: &FrameResult) {
+        self.work += r.clearance_work;
         self.frames.push(
-            records
+            crate::clearance::records(r)
                 .iter()
                 .map(|r| ClearanceRecord {
                     a: self.names[r.a].clone(),
@@ -118,7 +81,6 @@ impl ClearanceRun {
                 })
                 .collect(),
         );
-        self.total_us += t.elapsed().as_secs_f64() * 1e6;
     }
 
     /// Per pair, the minimum over the run (see [`frcd_io::summarize_clearances`]).
@@ -133,7 +95,7 @@ impl ClearanceRun {
     }
 
     fn threshold_text(&self) -> String {
-        let c = &self.thresholds.clearances;
+        let c = &self.clearances;
         let mut s = match c.default {
             Some(d) => format!("{d} for every checked pair"),
             None => "none scene-wide".to_string(),
@@ -145,15 +107,17 @@ impl ClearanceRun {
     }
 
     /// The text summary: per pair the minimum clearance and the frame where it occurs.
-    pub fn print(&self, report: &Report, frames: usize) {
+    pub fn print(&self, report: &Report) {
         let summary = self.summary(report);
+        let w = &self.work;
         println!(
-            "clearance (threshold {}; {:.1} µs/frame mean, {} box candidates, {} distance queries, {} exact decisions):",
+            "clearance (threshold {}; {} pair evaluations: {} proved far by the motion bound, {} distance queries ({} warm-started), {} exact decisions):",
             self.threshold_text(),
-            self.total_us / frames.max(1) as f64,
-            self.work.candidates,
-            self.work.distance_queries,
-            self.work.exact_decisions
+            w.pairs,
+            w.skipped,
+            w.distance_queries,
+            w.warm_starts,
+            w.exact_decisions
         );
         if summary.is_empty() {
             println!("  no checked pair came within its threshold");
@@ -200,7 +164,7 @@ impl ClearanceRun {
             }
         }
         if let Some(obj) = value.as_object_mut() {
-            let c = &self.thresholds.clearances;
+            let c = &self.clearances;
             let pairs: Vec<serde_json::Value> = c
                 .pairs
                 .iter()
@@ -261,7 +225,7 @@ impl ClearanceRun {
             }
         }
         let [first, last] = report.frame_range.unwrap_or([0, 0]);
-        let c = &self.thresholds.clearances;
+        let c = &self.clearances;
         let threshold = c.max_threshold().unwrap_or(0.0);
         let title = format!(
             "{}: clearance per body pair (threshold {})",

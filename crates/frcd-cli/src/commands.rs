@@ -25,6 +25,8 @@ pub struct CheckRun {
     pub pair_times: bool,
     pub pairs: bool,
     pub clearance: crate::clearance_run::ClearanceArgs,
+    /// `frcd plot-clearance`: print only the clearance summary (and write the plot).
+    pub plot_only: bool,
 }
 
 fn load_scene(path: &Path, args: &CheckerArgs) -> Result<Scene> {
@@ -224,6 +226,14 @@ fn mode_of(m: ModeArg) -> Mode {
     }
 }
 
+fn fit_of(f: crate::FitArg) -> frcd_obb::FitMethod {
+    match f {
+        crate::FitArg::Vertex => frcd_obb::FitMethod::VertexCovariance,
+        crate::FitArg::Area => frcd_obb::FitMethod::AreaWeighted,
+        crate::FitArg::Hull => frcd_obb::FitMethod::HullSurface,
+    }
+}
+
 fn options_of(args: &CheckerArgs, segments: bool, quiet: bool) -> Result<(Options, String)> {
     if !(16..=4096).contains(&args.resolution) {
         bail!("--resolution {} is outside 16..=4096", args.resolution);
@@ -237,13 +247,13 @@ fn options_of(args: &CheckerArgs, segments: bool, quiet: bool) -> Result<(Option
             image_resolution: args.resolution,
             cost,
             build: frcd_obb::BuildOptions {
-                fit: match args.fit {
-                    crate::FitArg::Vertex => frcd_obb::FitMethod::VertexCovariance,
-                    crate::FitArg::Area => frcd_obb::FitMethod::AreaWeighted,
-                    crate::FitArg::Hull => frcd_obb::FitMethod::HullSurface,
-                },
+                fit: fit_of(args.fit),
                 max_leaf_triangles: args.leaf.max(1),
             },
+            clearance_build: Some(frcd_obb::BuildOptions {
+                fit: fit_of(args.fit),
+                max_leaf_triangles: args.clearance_leaf.max(1),
+            }),
             ..Options::default()
         },
         source,
@@ -373,7 +383,14 @@ pub fn check(run: &CheckRun) -> Result<()> {
         outputs.push(("--csv", p));
     }
     if let Some(p) = &run.clearance.plot {
-        outputs.push(("--plot-clearance", p));
+        outputs.push((
+            if run.plot_only {
+                "--output"
+            } else {
+                "--plot-clearance"
+            },
+            p,
+        ));
     }
     if let Some(t) = run.clearance.threshold {
         frcd_io::check_clearance(t).map_err(|m| anyhow::anyhow!("--clearance: {m}"))?;
@@ -399,13 +416,15 @@ pub fn check(run: &CheckRun) -> Result<()> {
         Some(c) => run.first.saturating_add(c).min(n),
         None => n,
     };
-    let (options, cost_source) = options_of(&run.checker, run.segments, run.quiet)?;
+    let (mut options, cost_source) = options_of(&run.checker, run.segments, run.quiet)?;
     let mode = options.mode;
     let solid = options.solid;
     let t_setup = Instant::now();
-    let build = options.build;
+    let mut clearance = crate::clearance_run::ClearanceRun::new(&scene, &run.clearance)?;
+    if let Some(c) = &clearance {
+        c.apply(&mut options);
+    }
     let checker = make_checker(&scene, options)?;
-    let mut clearance = crate::clearance_run::ClearanceRun::new(&scene, &run.clearance, &build)?;
     let setup_ms = t_setup.elapsed().as_secs_f64() * 1e3;
     let mut notes: Vec<String> = checker.notes().iter().map(|n| term(n)).collect();
     notes.extend(mesh_notes(&scene, solid));
@@ -429,10 +448,10 @@ pub fn check(run: &CheckRun) -> Result<()> {
         let r = checker
             .check(poses, &mut state)
             .with_context(|| format!("frame {index}"))?;
-        if let Some(c) = clearance.as_mut() {
-            c.frame(poses, &r);
-        }
         let time_us = t.elapsed().as_secs_f64() * 1e6;
+        if let Some(c) = clearance.as_mut() {
+            c.frame(&r);
+        }
         for (tally, s) in tallies.iter_mut().zip(&r.stages) {
             tally.add(s.backend, s.time_us);
         }
@@ -454,7 +473,7 @@ pub fn check(run: &CheckRun) -> Result<()> {
     times.sort_by(f64::total_cmp);
     let median = percentile(&times, 0.5);
     let name = |i: usize| term(checker.body_name(i).unwrap_or("?"));
-    if !run.quiet {
+    if !run.quiet && !run.plot_only {
         println!(
             "{}: {} bodies, {} triangles, frames {}..={} ({} checked); backend {}, mode {}, cost model {}",
             term(&run.scene.display().to_string()),
@@ -526,8 +545,10 @@ pub fn check(run: &CheckRun) -> Result<()> {
                 );
             }
         }
+    }
+    if !run.quiet {
         if let Some(c) = &clearance {
-            c.print(&report, total);
+            c.print(&report);
         }
     }
     if let (Some(c), Some(path)) = (&clearance, &run.clearance.plot) {

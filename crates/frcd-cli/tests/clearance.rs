@@ -275,3 +275,115 @@ fn bad_thresholds_fail_cleanly_before_the_run() {
     assert_clean_failure(&o, "each output needs its own file");
     assert!(!dir.join("x.out").exists());
 }
+
+/// Every frame of the bogie demo with 5 mm: the checker's clearances through the run's state
+/// (motion-bound skips, warm starts) equal those of a fresh state each frame (no temporal
+/// state): the same pairs, the same distances, and the frames at 0 are the interfering ones.
+#[test]
+fn bogie_cached_clearance_equals_fresh_on_every_frame() {
+    use frcd_hybrid::{Backend, BodySpec, Checker, FrameState, Options};
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let path = root.join("testdata/bogie/scene.json");
+    if !path.exists() {
+        println!("SKIP bogie: {} not found", path.display());
+        return;
+    }
+    let scene = frcd_io::Scene::load(&path).unwrap();
+    let bodies = scene
+        .bodies()
+        .iter()
+        .map(|b| BodySpec {
+            name: b.name.clone(),
+            mesh: b.mesh.clone(),
+            is_static: b.is_static,
+        })
+        .collect();
+    let options = Options {
+        backend: Backend::Cpu,
+        clearance: Some(0.005),
+        ..Options::default()
+    };
+    let checker = Checker::new(bodies, scene.exclusions(), options).unwrap();
+    let mut state = FrameState::default();
+    let (mut work, mut reported) = (frcd_obb::ClearanceWork::default(), 0);
+    for (k, frame) in scene.frames().iter().enumerate() {
+        let cached = checker.check(&frame.poses, &mut state).unwrap();
+        let fresh = checker
+            .check(&frame.poses, &mut FrameState::default())
+            .unwrap();
+        assert_eq!(cached.contacts, fresh.contacts, "frame {k}");
+        let key = |c: &frcd_hybrid::PairClearance| (c.a, c.b, c.interfering);
+        let (g, w): (Vec<_>, Vec<_>) = (
+            cached.clearances.iter().map(key).collect(),
+            fresh.clearances.iter().map(key).collect(),
+        );
+        assert_eq!(g, w, "frame {k}: cached vs fresh pairs");
+        for (g, w) in cached.clearances.iter().zip(&fresh.clearances) {
+            // The same smallest computed distance (another triangle pair only on exact ties).
+            assert_eq!(g.distance, w.distance, "frame {k}: {g:?} vs {w:?}");
+            assert_eq!(g.distance == 0.0, g.interfering, "frame {k}: {g:?}");
+        }
+        let contacts: Vec<_> = cached.contacts.iter().map(|c| (c.a, c.b)).collect();
+        let zero: Vec<_> = cached
+            .clearances
+            .iter()
+            .filter(|c| c.interfering)
+            .map(|c| (c.a, c.b))
+            .collect();
+        assert_eq!(contacts, zero, "frame {k}");
+        work += cached.clearance_work;
+        reported += cached.clearances.len();
+    }
+    // The temporal state did skip queries, and the run reported pairs every frame.
+    assert!(work.skipped > 1000, "{work:?}");
+    assert!(reported > scene.frame_count(), "{reported}");
+    println!("bogie clearance work with temporal state: {work:?}");
+}
+
+/// `frcd plot-clearance`: the same plot as `check --plot-clearance` (one code path), the
+/// per-pair minima printed, nothing else; a threshold is required.
+#[test]
+fn plot_clearance_subcommand_writes_the_same_svg() {
+    let dir = tempdir("plotcmd");
+    scene(&dir, "");
+    let o = frcd(
+        &[
+            "check",
+            "scene.json",
+            "--backend",
+            "cpu",
+            "--clearance",
+            "0.005",
+            "--plot-clearance",
+            "check.svg",
+        ],
+        &dir,
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let o = frcd(
+        &[
+            "plot-clearance",
+            "scene.json",
+            "--backend",
+            "cpu",
+            "--clearance",
+            "0.005",
+            "-o",
+            "plot.svg",
+        ],
+        &dir,
+    );
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("a / b: min 0.000000 at frame 1"), "{t}");
+    assert!(out.contains("clearance of 2 pairs plotted"), "{t}");
+    assert!(!out.contains("time per frame"), "{t}");
+    let a = std::fs::read_to_string(dir.join("check.svg")).unwrap();
+    let b = std::fs::read_to_string(dir.join("plot.svg")).unwrap();
+    assert!(b.starts_with("<svg") && b.contains("a / b"), "{b}");
+    assert_eq!(a, b);
+    let o = frcd(&["plot-clearance", "scene.json", "-o", "x.svg"], &dir);
+    assert_clean_failure(&o, "needs a clearance threshold");
+    assert!(!dir.join("x.svg").exists());
+}

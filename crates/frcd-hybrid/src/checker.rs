@@ -36,6 +36,9 @@ pub struct Checker {
     pub(crate) bodies: Vec<BodyInfo>,
     pub(crate) meshes: Vec<Arc<TriMesh>>,
     pub(crate) trees: Vec<Arc<ObbTree>>,
+    /// Per mesh, the tree of the clearance searches (`trees` unless
+    /// [`Options::clearance_build`] asks for others).
+    pub(crate) clearance_trees: Vec<Arc<ObbTree>>,
     pub(crate) excluded: HashSet<(u32, u32)>,
     pub(crate) options: Options,
     pub(crate) notes: Vec<String>,
@@ -113,6 +116,14 @@ impl Checker {
             .par_iter()
             .map(|m| Arc::new(ObbTree::build(m, &build)))
             .collect();
+        let wants_clearance = options.clearance.is_some() || !options.pair_clearances.is_empty();
+        let clearance_trees: Vec<Arc<ObbTree>> = match options.clearance_build {
+            Some(cb) if wants_clearance && cb != build => meshes
+                .par_iter()
+                .map(|m| Arc::new(ObbTree::build(m, &cb)))
+                .collect(),
+            _ => trees.clone(),
+        };
         #[allow(unused_mut)]
         let mut checker = Checker {
             serial: NEXT_SERIAL.fetch_add(1, Ordering::Relaxed),
@@ -120,6 +131,7 @@ impl Checker {
             bodies: infos,
             meshes,
             trees,
+            clearance_trees,
             excluded,
             options,
             notes: Vec::new(),
@@ -280,6 +292,7 @@ impl Checker {
                         (false, false) => Plan::ClearanceOnly,
                     },
                     time_us: 0.0,
+                    clearance_work: frcd_obb::ClearanceWork::default(),
                 }
             })
             .collect();
@@ -341,6 +354,7 @@ impl Checker {
                     },
                 });
             }
+            result.clearance_work += job.clearance_work;
             if let Some(c) = out.clearance {
                 let c: PairClearance = c.with_ids(a, b);
                 result.clearances.push(c);

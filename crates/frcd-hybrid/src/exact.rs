@@ -97,14 +97,15 @@ impl Checker {
         };
         let mut outcome = outcome;
         if let Some(t) = job.threshold {
-            outcome.clearance = frcd_obb::pair_clearance(
-                ta,
+            (outcome.clearance, job.clearance_work) = frcd_obb::pair_clearance_cached(
+                &self.clearance_trees[self.bodies[ia].mesh],
                 pa,
-                tb,
+                &self.clearance_trees[self.bodies[ib].mesh],
                 pb,
                 t,
                 outcome.pairs.first().copied(),
                 outcome.collide(),
+                &mut job.state.clearance,
             );
         }
         job.plan = Plan::Cpu;
@@ -184,4 +185,6 @@ pub(crate) struct Job {
     pub(crate) state: PairState,
     pub(crate) plan: Plan,
     pub(crate) time_us: f64,
+    /// Work of this frame's clearance evaluation.
+    pub(crate) clearance_work: frcd_obb::ClearanceWork,
 }

@@ -29,8 +29,13 @@
 //! [`Options::clearance`] (and [`Options::pair_clearances`] per body pair): every tested pair
 //! whose surfaces come within the threshold is reported in [`FrameResult::clearances`] with its
 //! distance, closest points and triangle pair ([`frcd_obb::distance`]); interfering pairs
-//! report 0. Pairs beyond the threshold cost no distance query (an exact
-//! [`frcd_obb::distance::within`] decides first).
+//! report 0. Pairs whose grown boxes stay apart cost no distance query; the others run
+//! [`frcd_obb::pair_clearance_cached`] with state kept in the [`FrameState`]: a pair whose
+//! last certified distance, less the bodies' motion since (rigorously bounded), stays above the
+//! threshold costs no query either, and a search is bounded by the decision band (an exact
+//! [`frcd_obb::distance::within`] decides inside it). The answers equal those of a fresh
+//! state. The searches run on trees of their own ([`Options::clearance_build`]), in the
+//! narrow phase's parallel loop; [`FrameResult::clearance_work`] counts them.
 //!
 //! ## GPU failures and software adapters
 //!

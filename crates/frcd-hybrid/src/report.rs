@@ -93,6 +93,9 @@ pub struct FrameResult {
     /// With [`crate::Options::clearance`] or per-pair thresholds: every pair within its
     /// threshold, sorted by `(a, b)`; interfering pairs with distance 0.
     pub clearances: Vec<PairClearance>,
+    /// Work of this frame's clearance evaluations (pairs reused from the last frame not
+    /// counted): pairs, pairs proved far by the motion bound, distance queries, exact decisions.
+    pub clearance_work: frcd_obb::ClearanceWork,
     /// What happened this frame that the caller should know: GPU failures and the CPU fallback
     /// that answered instead.
     pub notes: Vec<String>,
@@ -122,6 +125,7 @@ impl FrameResult {
             acs_triangles: 0,
             pair_times_us: Vec::new(),
             clearances: Vec::new(),
+            clearance_work: frcd_obb::ClearanceWork::default(),
             notes: Vec::new(),
         }
     }

@@ -3,7 +3,7 @@
 use crate::report::Via;
 use crate::{Contact, Containment};
 use frcd_geom::Pose;
-use frcd_obb::{BodyId, Clearance, PairCache, World};
+use frcd_obb::{BodyId, Clearance, ClearanceCache, PairCache, World};
 use std::collections::HashMap;
 
 #[derive(Clone, Debug)]
@@ -26,6 +26,8 @@ pub(crate) struct PairState {
     pub(crate) poses: (Pose, Pose),
     pub(crate) result: Option<Outcome>,
     pub(crate) cache: PairCache,
+    /// Temporal state of the clearance evaluation.
+    pub(crate) clearance: ClearanceCache,
 }
 
 impl Default for PairState {
@@ -34,6 +36,7 @@ impl Default for PairState {
             poses: (Pose::IDENTITY, Pose::IDENTITY),
             result: None,
             cache: PairCache::new(),
+            clearance: ClearanceCache::new(),
         }
     }
 }

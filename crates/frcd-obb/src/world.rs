@@ -5,7 +5,9 @@ mod broad;
 mod clearance;
 mod handle;
 
-pub use clearance::{Clearance, pair_clearance};
+pub use clearance::{
+    Clearance, ClearanceCache, ClearanceWork, pair_clearance, pair_clearance_cached,
+};
 pub use handle::BodyId;
 
 use crate::query::{Collision, Containment, Counters, Mode, PairCache, Request, collide_cached};
@@ -117,6 +119,9 @@ pub struct StepReport<'w> {
     pub reused: usize,
     /// Work of the narrow-phase queries run this step.
     pub counters: Counters,
+    /// Work of the clearance evaluations run this step (pairs reused from the last step not
+    /// counted).
+    pub clearance_work: ClearanceWork,
 }
 
 #[derive(Debug)]
@@ -153,6 +158,10 @@ struct PairState {
     result: Option<Collision>,
     clearance: Option<Clearance<()>>,
     cache: PairCache,
+    /// Temporal state of the clearance evaluation.
+    clearance_cache: ClearanceCache,
+    /// Work of the last clearance evaluation.
+    clearance_work: ClearanceWork,
 }
 
 impl PairState {
@@ -165,6 +174,8 @@ impl PairState {
             result: None,
             clearance: None,
             cache: PairCache::new(),
+            clearance_cache: ClearanceCache::new(),
+            clearance_work: ClearanceWork::default(),
         }
     }
 }
@@ -184,6 +195,7 @@ struct StepStats {
     candidates: usize,
     reused: usize,
     counters: Counters,
+    clearance_work: ClearanceWork,
 }
 
 /// Bodies sharing trees through `Arc<ObbTree>`, addressed by generational [`BodyId`] handles;
@@ -678,21 +690,25 @@ impl World {
                     &mut st.cache,
                 )
             });
-            st.clearance = e.threshold.and_then(|t| {
-                let (witness, interfering) = st
-                    .result
-                    .as_ref()
-                    .map_or((None, false), |c| (c.witness, c.collide));
-                pair_clearance(
-                    &ba.tree,
-                    &ba.pose,
-                    &bb.tree,
-                    &bb.pose,
-                    t,
-                    witness,
-                    interfering,
-                )
-            });
+            (st.clearance, st.clearance_work) = match e.threshold {
+                Some(t) => {
+                    let (witness, interfering) = st
+                        .result
+                        .as_ref()
+                        .map_or((None, false), |c| (c.witness, c.collide));
+                    pair_clearance_cached(
+                        &ba.tree,
+                        &ba.pose,
+                        &bb.tree,
+                        &bb.pose,
+                        t,
+                        witness,
+                        interfering,
+                        &mut st.clearance_cache,
+                    )
+                }
+                None => (None, ClearanceWork::default()),
+            };
             st.versions = versions;
             st.epochs = epochs;
             st.threshold = e.threshold;
@@ -718,6 +734,8 @@ impl World {
         for (i, (e, reused)) in work.iter().zip(reused).enumerate() {
             if reused {
                 stats.reused += 1;
+            } else {
+                stats.clearance_work += e.state.clearance_work;
             }
             if let Some(c) = &e.state.result {
                 if !reused {
@@ -763,6 +781,7 @@ impl World {
             candidates: self.stats.candidates,
             reused: self.stats.reused,
             counters: self.stats.counters,
+            clearance_work: self.stats.clearance_work,
         }
     }
 

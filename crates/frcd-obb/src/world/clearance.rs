@@ -1,11 +1,47 @@
-//! Clearance: the distance of every body pair closer than a threshold.
+//! Clearance: the distance of every body pair closer than a threshold, with per-pair state
+//! between frames that proves most far pairs far without a distance query.
+//!
+//! # The decision
+//!
+//! A pair that does not interfere is within its threshold `t` when the exact distance `d*` of
+//! the f64 inputs (A's vertices, B's mapped into A's frame by [`RelativeFrame`]) is `<= t`.
+//! [`distance_below`] gives `d`, the smallest computed triangle-pair distance, with
+//! `d* - WORST·e <= d <= d* + e` (`e` = [`error_bound`]; `WORST·e` covers the ill-conditioned
+//! features of the distance module's docs, which lose at most `~sqrt(ε)·L`, with a margin of
+//! about 100). So `d + e <= t` proves the pair within, `d - WORST·e > t` proves it not, and in
+//! the band between [`within`] decides exactly. The search is bounded by `t + WORST·e` (plus a
+//! look-ahead, below): a farther pair never opens the node pairs a full search would.
+//!
+//! # Temporal state ([`ClearanceCache`])
+//!
+//! Each query leaves a certificate: the relative frame `(M₀, t₀)` it ran in and a certified
+//! lower bound `L₀ <= d*₀` (`d - WORST·e`, or the search limit less `WORST·e` when nothing came
+//! below it). In a later frame `(M₁, t₁)` every vertex `v` of B moves in A's frame by at most
+//! `‖M₁ - M₀‖_F·r_B + |t₁ - t₀|` (`r_B` bounds `|v|`), plus the rounding of both mappings; A's
+//! vertices do not move in A's frame, and every surface point is a convex combination of its
+//! triangle's vertices, so `d*₁ >= L₀ - motion`. When that exceeds `t` the pair is not within
+//! and no query runs: the answer is the one a fresh query gives. The bound compares the two
+//! frames directly, so it does not accumulate over the skipped frames, and teleports are safe.
+//!
+//! A query that runs starts from the previous answer's triangle pair ([`DistanceCache`]) when
+//! that pair is still closer than the search limit (the search then prunes from its first box
+//! test), and otherwise from the limit. Either way its answer is the smallest computed
+//! triangle-pair distance below the limit, as without the cache (on exact ties another triangle
+//! pair of the same distance may be named).
 
 use super::BodyId;
-use crate::distance::{DistanceRequest, distance, within};
+use crate::distance::{
+    Distance, DistanceCache, DistanceRequest, distance_below, distance_cached, error_bound, within,
+};
 use crate::query::RelativeFrame;
 use crate::tree::ObbTree;
-use frcd_geom::{DVec3, Pose};
+use frcd_geom::{DMat3, DVec3, Pose};
 use frcd_tritri::Contact;
+
+/// Factor from [`Distance::error_bound`] (well-conditioned features) to a bound that holds for
+/// every feature pair: `2²⁸·64ε = 2⁻¹⁹` relative to the scene magnitude, against the
+/// `~sqrt(ε) = 2⁻²⁶·⁵` the distance module's docs derive for the worst case.
+const WORST: f64 = (1u64 << 28) as f64;
 
 /// A body pair closer than its clearance threshold (or interfering), with where it is closest.
 ///
@@ -43,12 +79,95 @@ impl<Id> Clearance<Id> {
     }
 }
 
+/// Work of clearance evaluations (summed with `+=`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct ClearanceWork {
+    /// Pair evaluations (one per pair with a threshold whose boxes came within it).
+    pub pairs: u64,
+    /// Pairs proved farther than their threshold by the motion bound: no query.
+    pub skipped: u64,
+    /// Distance searches run.
+    pub distance_queries: u64,
+    /// Searches seeded with the previous answer's triangle pair.
+    pub warm_starts: u64,
+    /// Exact [`within`] decisions (a distance within its error band of the threshold).
+    pub exact_decisions: u64,
+}
+
+impl std::ops::AddAssign for ClearanceWork {
+    fn add_assign(&mut self, o: Self) {
+        self.pairs += o.pairs;
+        self.skipped += o.skipped;
+        self.distance_queries += o.distance_queries;
+        self.warm_starts += o.warm_starts;
+        self.exact_decisions += o.exact_decisions;
+    }
+}
+
+/// What a query proved about one frame of a pair.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Certificate {
+    /// The trees it holds for (their build identities).
+    trees: (u64, u64),
+    /// B's frame in A's at that frame.
+    m: DMat3,
+    t: DVec3,
+    /// A lower bound on the exact surface distance then.
+    lower: f64,
+}
+
+/// Caller-owned state of one body pair between frames for [`pair_clearance_cached`]: a lower
+/// bound on the pair's distance and the relative pose it holds for (see the module docs), the
+/// previous answer's triangle pair, and the last relative pose (to size the look-ahead).
+///
+/// A cache used with other trees is safe: the certificate names its trees and is ignored for
+/// others.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ClearanceCache {
+    distance: DistanceCache,
+    cert: Option<Certificate>,
+    /// Relative frame of the last call and how far B moved (bound) since the call before.
+    last: Option<(DMat3, DVec3)>,
+    step: f64,
+    /// The last search found the pair below its limit.
+    near: bool,
+}
+
+impl ClearanceCache {
+    /// An empty cache.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Forgets everything.
+    pub fn clear(&mut self) {
+        *self = Self::default();
+    }
+}
+
+/// A bound on how far any point of B's surface, mapped into A's frame, moves between frame
+/// `(m0, t0)` and `f`: `‖Δm‖_F·r + |Δt|` (`‖·‖_F` bounds the spectral norm), grown by `1e-12`
+/// relative for the rounding of this sum, and by the rounding of both mappings (per coordinate
+/// `γ₃(|row|·|v| + |t|)`, `≤ 3·2⁻⁵²(r + |t|)` as a vector norm; 8 used).
+fn motion_bound(m0: &DMat3, t0: DVec3, f: &RelativeFrame, radius: f64) -> f64 {
+    let dm = f.m - *m0;
+    let fro =
+        (dm.x_axis.length_squared() + dm.y_axis.length_squared() + dm.z_axis.length_squared())
+            .sqrt();
+    let exact = fro * radius + (f.t - t0).length();
+    let rounding = 8.0 * f64::EPSILON * (2.0 * radius + t0.length() + f.t.length());
+    exact * (1.0 + 1e-12) + rounding
+}
+
 /// The clearance of one body pair for a `threshold`, given what the collision query found:
 /// `None` when the pair does not interfere and its surfaces are farther apart than the threshold
-/// (decided exactly by [`within`], so no distance query is run for such a pair); otherwise the
-/// distance (0 when `interfering`), closest points and triangle pair. `witness` is a touching
-/// triangle pair of an interfering pair, when there is one (its contact point is reported
-/// without a distance query).
+/// (decided exactly); otherwise the distance (0 when `interfering`), closest points and triangle
+/// pair. `witness` is a touching triangle pair of an interfering pair, when there is one (its
+/// contact point is reported without a distance query).
+///
+/// This is [`pair_clearance_cached`] with a fresh cache: the same answers, without the
+/// temporal state.
 pub fn pair_clearance(
     a: &ObbTree,
     pose_a: &Pose,
@@ -58,9 +177,71 @@ pub fn pair_clearance(
     witness: Option<(u32, u32)>,
     interfering: bool,
 ) -> Option<Clearance<()>> {
+    let mut cache = ClearanceCache::new();
+    pair_clearance_cached(
+        a,
+        pose_a,
+        b,
+        pose_b,
+        threshold,
+        witness,
+        interfering,
+        &mut cache,
+    )
+    .0
+}
+
+/// [`pair_clearance`] with per-pair state between frames (see the module docs): a pair whose
+/// certified lower bound from an earlier query, less the motion bound of the two bodies since,
+/// stays above the threshold is answered `None` without a query; a query that runs starts from
+/// the previous answer's triangle pair. The answers are those of [`pair_clearance`]: the same
+/// pairs, the same distances (on exact ties another triangle pair of the same distance may be
+/// named). Also returns the work done.
+///
+/// ```
+/// use frcd_obb::{BuildOptions, ClearanceCache, ObbTree, pair_clearance, pair_clearance_cached};
+/// use frcd_geom::{shapes, DVec3, Pose};
+/// let t = ObbTree::build(&shapes::cuboid(DVec3::splat(0.5)), &BuildOptions::default());
+/// let mut cache = ClearanceCache::new();
+/// for k in 0..6 {
+///     // B approaches A from 30 mm to 20 mm; the threshold is 5 mm.
+///     let pb = Pose::from_translation(DVec3::new(1.03 - 0.002 * k as f64, 0.0, 0.0));
+///     let (c, work) = pair_clearance_cached(&t, &Pose::IDENTITY, &t, &pb, 0.005, None, false, &mut cache);
+///     assert_eq!(c, pair_clearance(&t, &Pose::IDENTITY, &t, &pb, 0.005, None, false));
+///     assert!(c.is_none());
+///     if k > 1 {
+///         // The second query looked ahead by 8 frames of the motion it saw: no query since.
+///         assert_eq!((work.skipped, work.distance_queries), (1, 0));
+///     }
+/// }
+/// ```
+#[allow(clippy::too_many_arguments)]
+pub fn pair_clearance_cached(
+    a: &ObbTree,
+    pose_a: &Pose,
+    b: &ObbTree,
+    pose_b: &Pose,
+    threshold: f64,
+    witness: Option<(u32, u32)>,
+    interfering: bool,
+    cache: &mut ClearanceCache,
+) -> (Option<Clearance<()>>, ClearanceWork) {
+    let mut work = ClearanceWork {
+        pairs: 1,
+        ..ClearanceWork::default()
+    };
+    let frame = RelativeFrame::new(pose_a, pose_b);
+    let radius = b.radius_from_origin * (1.0 + 1e-12);
+    // How far B moved since the last call: sizes the look-ahead below.
+    cache.step = match &cache.last {
+        Some((m, t)) => motion_bound(m, *t, &frame, radius),
+        None => f64::INFINITY,
+    };
+    cache.last = Some((frame.m, frame.t));
     if interfering {
+        cache.cert = None;
+        cache.near = true;
         if let Some((x, y)) = witness {
-            let frame = RelativeFrame::new(pose_a, pose_b);
             let ta = a.triangle(x);
             let tb = frame.triangle(&b.triangle(y));
             let p = match frcd_tritri::intersection_segment(&ta, &tb) {
@@ -71,25 +252,149 @@ pub fn pair_clearance(
                 _ => crate::oracle::closest_points_triangles(&ta, &tb).1,
             };
             let w = pose_a.transform_point(p);
-            return Some(Clearance {
+            return (
+                Some(Clearance {
+                    a: (),
+                    b: (),
+                    distance: 0.0,
+                    points: [w, w],
+                    triangles: (x, y),
+                    interfering: true,
+                }),
+                work,
+            );
+        }
+        // Contained: 0, with the closest surface points however far apart they are.
+        work.distance_queries += 1;
+        let d = distance_cached(
+            a,
+            pose_a,
+            b,
+            pose_b,
+            &DistanceRequest::default(),
+            &mut cache.distance,
+        );
+        return (
+            Some(Clearance {
                 a: (),
                 b: (),
                 distance: 0.0,
-                points: [w, w],
-                triangles: (x, y),
+                points: d.points,
+                triangles: d.triangles,
                 interfering: true,
-            });
-        }
-    } else if !within(a, pose_a, b, pose_b, threshold) {
-        return None;
+            }),
+            work,
+        );
     }
-    let d = distance(a, pose_a, b, pose_b, &DistanceRequest::default());
-    Some(Clearance {
+    if threshold.is_nan() || threshold < 0.0 {
+        return (None, work);
+    }
+    let trees = (a.uid, b.uid);
+    if let Some(c) = cache.cert.filter(|c| c.trees == trees) {
+        let motion = motion_bound(&c.m, c.t, &frame, radius);
+        if c.lower > (threshold + motion) * (1.0 + 1e-15) {
+            work.skipped += 1;
+            return (None, work);
+        }
+    }
+    let err = error_bound(a, pose_a, b, pose_b);
+    let worst = WORST * err;
+    let band_top = threshold + worst;
+    // Look ahead: search a little past the band so that the certificate left behind covers a
+    // few frames of the motion seen in the last one (0 when the motion is large against the
+    // threshold: such a pair cannot be skipped for long, and the search would only grow).
+    let reach = if cache.step <= threshold / 2.0 {
+        (8.0 * cache.step).max(1e-9 * (threshold + worst))
+    } else {
+        0.0
+    };
+    let limit = band_top + reach;
+    work.distance_queries += 1;
+    let found = search(a, pose_a, b, pose_b, &frame, limit, cache, &mut work);
+    let Some(d) = found.filter(|d| !d.distance.is_nan()) else {
+        // Every computed distance is at least `limit`: the exact one at least `limit - worst`.
+        cache.cert = Some(Certificate {
+            trees,
+            m: frame.m,
+            t: frame.t,
+            lower: lower_bound(limit, worst),
+        });
+        return (None, work);
+    };
+    cache.cert = Some(Certificate {
+        trees,
+        m: frame.m,
+        t: frame.t,
+        lower: lower_bound(d.distance, worst),
+    });
+    if d.distance >= band_top {
+        return (None, work);
+    }
+    let inside = d.distance + d.error_bound <= threshold
+        || (d.distance - worst <= threshold && {
+            work.exact_decisions += 1;
+            within(a, pose_a, b, pose_b, threshold)
+        });
+    let answer = inside.then_some(Clearance {
         a: (),
         b: (),
-        distance: if interfering { 0.0 } else { d.distance },
+        distance: d.distance,
         points: d.points,
         triangles: d.triangles,
-        interfering,
-    })
+        interfering: false,
+    });
+    (answer, work)
+}
+
+/// `x - worst`, rounded down.
+fn lower_bound(x: f64, worst: f64) -> f64 {
+    let l = x - worst;
+    l - l.abs() * 1e-15
+}
+
+/// The smallest computed triangle-pair distance below `limit` (`None`: none below it).
+///
+/// [`DistanceCache`] is filled only by [`distance_cached`], whose search is unbounded. So: with
+/// a cached pair closer than `limit`, the seeded search (it starts below `limit`, so it opens no
+/// more node pairs than the bounded one, and finds the same smallest distance); without one,
+/// but when the last search found the pair below its limit, the unbounded search (best-first:
+/// it expands the same node pairs as the bounded one when the answer is below `limit`), which
+/// stores its pair for the next frame; otherwise the bounded [`distance_below`].
+#[allow(clippy::too_many_arguments)]
+fn search(
+    a: &ObbTree,
+    pose_a: &Pose,
+    b: &ObbTree,
+    pose_b: &Pose,
+    frame: &RelativeFrame,
+    limit: f64,
+    cache: &mut ClearanceCache,
+    work: &mut ClearanceWork,
+) -> Option<Distance> {
+    let r = DistanceRequest::default();
+    let seeded = cache.distance.pair().is_some_and(|(x, y)| {
+        (x as usize) < a.triangles().len()
+            && (y as usize) < b.triangles().len()
+            && crate::oracle::closest_points_triangles(
+                &a.triangle(x),
+                &frame.triangle(&b.triangle(y)),
+            )
+            .0 < limit
+    });
+    let d = if seeded || cache.near {
+        work.warm_starts += seeded as u64;
+        Some(distance_cached(
+            a,
+            pose_a,
+            b,
+            pose_b,
+            &r,
+            &mut cache.distance,
+        ))
+        .filter(|d| d.distance < limit)
+    } else {
+        distance_below(a, pose_a, b, pose_b, &r, limit)
+    };
+    cache.near = d.is_some();
+    d
 }

@@ -1,0 +1,192 @@
+//! The many-body `World::step` on one thread and on two (issue 9: with rayon on 2 cores the
+//! step takes at most 1/1.7 of its one-thread time).
+//!
+//! Scene: a jittered 6×6×6 grid of 216 bodies (icospheres of 1,280 and 320 triangles, boxes,
+//! torus knots of 2,048), spaced so that neighbours overlap at most steps, every body moving a
+//! little each step (no answer is reused), all-pairs mode with coherence caches. The
+//! `world/step_ratio` line times both pools interleaved, step by step, and prints the medians
+//! and their ratio (the machine's load moves both alike); the criterion rows time each alone.
+//!
+//! ```text
+//! cargo bench -p frcd-benches --bench world -- --warm-up-time 1 --measurement-time 3
+//! ```
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use frcd_benches::scenes::Rng;
+use frcd_geom::shapes::{self, TorusKnotParams, torus_knot};
+use frcd_geom::{DQuat, DVec3, Pose, TriMesh};
+use frcd_obb::{BodyId, BuildOptions, ObbTree, World, WorldOptions};
+use std::hint::black_box;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+const SIDE: usize = 6;
+const FRAMES: usize = 64;
+
+struct Scene {
+    trees: Vec<Arc<ObbTree>>,
+    /// Per body: its tree.
+    body_tree: Vec<usize>,
+    frames: Vec<Vec<Pose>>,
+}
+
+fn scene() -> Scene {
+    let meshes: Vec<TriMesh> = vec![
+        shapes::icosphere(0.5, 3),
+        shapes::cuboid(DVec3::new(0.45, 0.3, 0.35)),
+        torus_knot(&TorusKnotParams {
+            radius: 0.3,
+            offset: 0.12,
+            tube_radius: 0.05,
+            tubular_segments: 128,
+            radial_segments: 8,
+            ..TorusKnotParams::default()
+        })
+        .expect("valid knot"),
+        shapes::icosphere(0.45, 2),
+    ];
+    let trees: Vec<Arc<ObbTree>> = meshes
+        .iter()
+        .map(|m| Arc::new(ObbTree::build(m, &BuildOptions::default())))
+        .collect();
+    let n = SIDE * SIDE * SIDE;
+    let mut rng = Rng::new(0x5eed);
+    let spacing = 0.9;
+    let base: Vec<(DVec3, DQuat, DVec3, DQuat)> = (0..n)
+        .map(|i| {
+            let g = DVec3::new(
+                (i % SIDE) as f64,
+                ((i / SIDE) % SIDE) as f64,
+                (i / (SIDE * SIDE)) as f64,
+            );
+            let p = g * spacing
+                + DVec3::new(
+                    rng.range(-0.1, 0.1),
+                    rng.range(-0.1, 0.1),
+                    rng.range(-0.1, 0.1),
+                );
+            let v = rng.unit() * 0.004;
+            let w = DQuat::from_axis_angle(rng.unit(), 0.01);
+            (p, rng.rotation(), v, w)
+        })
+        .collect();
+    let frames = (0..FRAMES)
+        .map(|k| {
+            // Back and forth, so that the sequence can be cycled coherently.
+            let s = (k as f64 * std::f64::consts::TAU / FRAMES as f64).sin() * 8.0;
+            base.iter()
+                .map(|(p, q, v, w)| {
+                    let spin = DQuat::from_axis_angle(
+                        w.xyz().try_normalize().unwrap_or(DVec3::Z),
+                        0.01 * s,
+                    );
+                    Pose::new(*p + *v * s, (spin * *q).normalize())
+                })
+                .collect()
+        })
+        .collect();
+    Scene {
+        body_tree: (0..n).map(|i| i % trees.len()).collect(),
+        trees,
+        frames,
+    }
+}
+
+fn world(s: &Scene, threads: usize) -> (World, Vec<BodyId>) {
+    let mut w = World::new(WorldOptions::default());
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("thread pool");
+    w.set_thread_pool(Some(Arc::new(pool)));
+    let ids = s.frames[0]
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            w.add_body(s.trees[s.body_tree[i]].clone(), *p, false)
+                .expect("valid pose")
+        })
+        .collect();
+    (w, ids)
+}
+
+/// One step at frame `k` (cycled).
+fn step(w: &mut World, ids: &[BodyId], s: &Scene, k: usize) -> usize {
+    let f = &s.frames[k % FRAMES];
+    let updates: Vec<(BodyId, Pose)> = ids.iter().copied().zip(f.iter().copied()).collect();
+    w.set_poses(&updates).expect("valid poses");
+    w.step().contacts.len()
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn load() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|_| "?".into())
+}
+
+fn bench_world(c: &mut Criterion) {
+    let s = scene();
+    let (mut w1, ids1) = world(&s, 1);
+    let (mut w2, ids2) = world(&s, 2);
+    // Warm both (caches, broad-phase order), and count the work.
+    let (mut contacts, mut candidates) = (0, 0);
+    for k in 0..FRAMES {
+        contacts += step(&mut w1, &ids1, &s, k);
+        candidates += w1.last_step().candidates;
+        step(&mut w2, &ids2, &s, k);
+    }
+    // Interleaved: both pools see the same load.
+    let (mut t1, mut t2) = (Vec::new(), Vec::new());
+    let t_end = Instant::now() + Duration::from_secs(4);
+    let mut k = 0;
+    while Instant::now() < t_end || t1.len() < 20 {
+        let t = Instant::now();
+        black_box(step(&mut w1, &ids1, &s, k));
+        t1.push(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        black_box(step(&mut w2, &ids2, &s, k));
+        t2.push(t.elapsed().as_secs_f64());
+        k += 1;
+    }
+    let (m1, m2) = (median(t1), median(t2));
+    println!(
+        "world/step_ratio: {} bodies, {:.1} candidate pairs and {:.1} touching pairs per step; 1 thread {:.3} ms, 2 threads {:.3} ms median over {} steps each: {:.2}x (load average {})",
+        s.frames[0].len(),
+        candidates as f64 / FRAMES as f64,
+        contacts as f64 / FRAMES as f64,
+        m1 * 1e3,
+        m2 * 1e3,
+        k,
+        m1 / m2,
+        load()
+    );
+    let mut g = c.benchmark_group("world");
+    g.sample_size(20);
+    let mut k1 = 0;
+    g.bench_function("step_1_thread", |b| {
+        b.iter(|| {
+            k1 += 1;
+            step(&mut w1, &ids1, &s, k1)
+        })
+    });
+    let mut k2 = 0;
+    g.bench_function("step_2_threads", |b| {
+        b.iter(|| {
+            k2 += 1;
+            step(&mut w2, &ids2, &s, k2)
+        })
+    });
+    g.finish();
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default().warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(3));
+    targets = bench_world
+}
+criterion_main!(benches);
