@@ -127,14 +127,12 @@ pub fn frame_clearances(
             let (ta, tb, pa, pb) = (trees[a], trees[b], &poses[a], &poses[b]);
             if let Some(&(_, _, x, y)) = touching.iter().find(|t| (t.0, t.1) == (a, b)) {
                 // The checker found this triangle pair touching: distance 0, no query.
-                let (Some(tri_a), Some(tri_b)) = (
-                    ta.triangles().get(x as usize),
-                    tb.triangles().get(y as usize),
-                ) else {
+                if x as usize >= ta.triangle_count() || y as usize >= tb.triangle_count() {
                     continue;
-                };
-                let tri_b = frcd_obb::RelativeFrame::new(pa, pb).triangle(tri_b);
-                let (_, p, q) = frcd_obb::oracle::closest_points_triangles(tri_a, &tri_b);
+                }
+                let tri_a = ta.triangle(x);
+                let tri_b = frcd_obb::RelativeFrame::new(pa, pb).triangle(&tb.triangle(y));
+                let (_, p, q) = frcd_obb::oracle::closest_points_triangles(&tri_a, &tri_b);
                 out.push(Record {
                     a,
                     b,
