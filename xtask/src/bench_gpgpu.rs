@@ -18,8 +18,12 @@
 //! pool) or on the GPU (`GpuContext::collide_batch`: one dispatch chain, one submission, one
 //! readback per frame). Answers checked equal on every frame.
 //!
-//! Many bodies: `GpuContext::overlapping_bodies` against the CPU's all-pairs box test, by body
-//! count (1 to 4,096).
+//! Many bodies (`--bodies 1,16,256,1024,4096,16384`): the rough colliding set of n boxes scattered
+//! with about 4 neighbours each, by four methods, answers checked equal: the CPU all-pairs test,
+//! the CPU sort-and-sweep (sort by min x, scan forward; the `World` broad phase's algorithm with
+//! a fresh sort, one thread), the GPU all-pairs pass (`overlapping_bodies_all_pairs`) and the GPU
+//! sort-and-sweep (`overlapping_bodies`: bitonic sort in WGSL, scan, one submission). The
+//! all-pairs columns are left out above 4,096 bodies. `--boxes-only` runs this section alone.
 //!
 //! The crossover (the smallest size where the GPU is faster) is printed for each comparison.
 //! Options: `--levels 1,2,3,4,5`, `--pairs K`, `--bodies 100,400,...`, `--runs N`, `--out DIR`.
@@ -40,16 +44,18 @@ struct Opts {
     frames: Vec<usize>,
     runs: usize,
     out: PathBuf,
+    boxes_only: bool,
 }
 
 fn parse(args: &[String]) -> Result<Opts> {
     let mut o = Opts {
         levels: vec![1, 2, 3, 4, 5],
         pairs: 8,
-        bodies: vec![1, 16, 256, 1024, 4096],
+        bodies: vec![1, 16, 256, 1024, 4096, 16384],
         frames: vec![2, 8, 64],
         runs: 5,
         out: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bench"),
+        boxes_only: false,
     };
     let list = |s: Option<&String>| -> Result<Vec<u64>> {
         s.context("missing value")?
@@ -68,8 +74,9 @@ fn parse(args: &[String]) -> Result<Opts> {
             "--pairs" => o.pairs = it.next().context("--pairs N")?.parse()?,
             "--runs" => o.runs = it.next().context("--runs N")?.parse()?,
             "--out" => o.out = PathBuf::from(it.next().context("--out DIR")?),
+            "--boxes-only" => o.boxes_only = true,
             other => bail!(
-                "bench gpgpu: unknown option '{other}' (--levels L,.. --pairs K --bodies N,.. --frame-parts N,.. --runs N --out DIR)"
+                "bench gpgpu: unknown option '{other}' (--levels L,.. --pairs K --bodies N,.. --frame-parts N,.. --runs N --out DIR --boxes-only)"
             ),
         }
     }
@@ -177,8 +184,45 @@ fn broad_phase(trees: &[&ObbTree], poses: &[Pose]) -> Vec<(usize, usize)> {
 struct BoxRow {
     bodies: usize,
     pairs: usize,
+    /// CPU all-pairs (None above the all-pairs limit).
+    cpu_all: Option<f64>,
+    /// CPU sort-and-sweep, one thread.
     cpu: f64,
+    /// GPU all-pairs pass (None above the all-pairs limit).
+    gpu_all: Option<f64>,
+    /// GPU sort-and-sweep.
     gpu: f64,
+}
+
+/// Largest body count timed with the O(n²) methods.
+const ALL_PAIRS_LIMIT: usize = 4096;
+
+/// The CPU sort-and-sweep over boxes (the `World` broad phase's algorithm, fresh sort): sort by
+/// `min.x`, each box scans forward while the next `min.x` is within its `max.x`. Sorted pairs.
+fn cpu_sweep(boxes: &[Aabb]) -> Vec<(u32, u32)> {
+    let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
+    order.sort_unstable_by(|&a, &b| {
+        boxes[a as usize]
+            .min
+            .x
+            .total_cmp(&boxes[b as usize].min.x)
+            .then(a.cmp(&b))
+    });
+    let mut out = Vec::new();
+    for (p, &i) in order.iter().enumerate() {
+        let bi = &boxes[i as usize];
+        for &j in &order[p + 1..] {
+            let bj = &boxes[j as usize];
+            if bj.min.x > bi.max.x {
+                break;
+            }
+            if bi.intersects(bj) {
+                out.push((i.min(j), i.max(j)));
+            }
+        }
+    }
+    out.sort_unstable();
+    out
 }
 
 /// Body-pair poses of a step: B crossing A at `0.9 + 0.1 k / K` along a turning direction.
@@ -218,7 +262,11 @@ fn crossover(label: &str, sizes: &[String], cpu: &[f64], gpu: &[f64]) -> String 
 
 /// Runs the suite.
 pub fn run(args: &[String]) -> Result<()> {
-    let o = parse(args)?;
+    let mut o = parse(args)?;
+    if o.boxes_only {
+        o.levels.clear();
+        o.frames.clear();
+    }
     let load_start = load_average();
     let ctx = GpuContext::headless().context("bench gpgpu needs a GPU adapter")?;
     let info = ctx.adapter_info().clone();
@@ -381,6 +429,7 @@ pub fn run(args: &[String]) -> Result<()> {
 
     let mut box_rows = Vec::new();
     let mut box_scratch = BoxScratch::default();
+    let mut all_scratch = BoxScratch::default();
     for &n in &o.bodies {
         // Bodies of size ~1 scattered in a cube holding about 4 neighbours each.
         let side = (n as f64 / 4.0).cbrt() * 2.0;
@@ -409,13 +458,36 @@ pub fn run(args: &[String]) -> Result<()> {
             }
             out
         };
-        let want = cpu_pairs();
+        let small = n <= ALL_PAIRS_LIMIT;
+        let want = cpu_sweep(&boxes);
         let got = ctx.overlapping_bodies(&boxes, &mut box_scratch)?;
         if got.pairs != want {
-            bail!("{n} bodies: GPU box pairs differ from the CPU's");
+            bail!("{n} bodies: GPU sweep pairs differ from the CPU's");
         }
+        if small {
+            if cpu_pairs() != want {
+                bail!("{n} bodies: CPU sweep differs from CPU all-pairs");
+            }
+            let all = ctx.overlapping_bodies_all_pairs(&boxes, &mut all_scratch)?;
+            if all.pairs != want {
+                bail!("{n} bodies: GPU all-pairs pairs differ from the CPU's");
+            }
+        }
+        let cpu_all = small.then(|| {
+            median_ms(o.runs, || {
+                std::hint::black_box(cpu_pairs());
+            })
+        });
         let cpu = median_ms(o.runs, || {
-            std::hint::black_box(cpu_pairs());
+            std::hint::black_box(cpu_sweep(&boxes));
+        });
+        let gpu_all = small.then(|| {
+            median_ms(o.runs, || {
+                std::hint::black_box(
+                    ctx.overlapping_bodies_all_pairs(&boxes, &mut all_scratch)
+                        .expect("checked above"),
+                );
+            })
         });
         let gpu = median_ms(o.runs, || {
             std::hint::black_box(
@@ -424,13 +496,15 @@ pub fn run(args: &[String]) -> Result<()> {
             );
         });
         println!(
-            "{n} bodies: {} pairs, cpu {cpu:.2} ms, gpu {gpu:.2} ms",
+            "{n} bodies: {} pairs, cpu all-pairs {cpu_all:?} ms, cpu sweep {cpu:.2} ms, gpu all-pairs {gpu_all:?} ms, gpu sweep {gpu:.2} ms",
             want.len()
         );
         box_rows.push(BoxRow {
             bodies: n,
             pairs: want.len(),
+            cpu_all,
             cpu,
+            gpu_all,
             gpu,
         });
     }
@@ -457,6 +531,7 @@ pub fn run(args: &[String]) -> Result<()> {
              columns); no real GPU was available for this measurement.\n"
         )?;
     }
+    let header_len = md.len();
     writeln!(
         md,
         "## Pair queries ({} body pairs per step, all touching pairs, equal answers checked)\n",
@@ -553,6 +628,7 @@ pub fn run(args: &[String]) -> Result<()> {
         );
         writeln!(md, "\n- {c1}\n- {cn}\n")?;
     }
+    let box_start = md.len();
     if !box_rows.is_empty() {
         writeln!(
             md,
@@ -560,18 +636,29 @@ pub fn run(args: &[String]) -> Result<()> {
         )?;
         writeln!(
             md,
-            "| bodies | overlapping pairs | CPU all-pairs ms | GPU ms (transfers incl.) | GPU / CPU |"
+            "Boxes scattered with about 4 neighbours each; every method's pairs checked equal. \
+             CPU columns on one thread; GPU columns include the upload, sort, sweep, readback, \
+             f64 re-check of uncertain pairs and the final sort of the pairs.\n"
         )?;
-        writeln!(md, "|---|---|---|---|---|")?;
+        writeln!(
+            md,
+            "| bodies | overlapping pairs | CPU all-pairs ms | CPU sort-and-sweep ms | GPU all-pairs ms | GPU sort-and-sweep ms | GPU sweep / CPU sweep | GPU sweep / GPU all-pairs |"
+        )?;
+        writeln!(md, "|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+        let opt = |x: Option<f64>| x.map_or("—".to_string(), |v| format!("{v:.2}"));
         for r in &box_rows {
             writeln!(
                 md,
-                "| {} | {} | {:.2} | {:.2} | {:.2} |",
+                "| {} | {} | {} | {:.2} | {} | {:.2} | {:.2}× | {} |",
                 r.bodies,
                 r.pairs,
+                opt(r.cpu_all),
                 r.cpu,
+                opt(r.gpu_all),
                 r.gpu,
-                r.gpu / r.cpu
+                r.gpu / r.cpu,
+                r.gpu_all
+                    .map_or("—".to_string(), |a| format!("{:.2}×", r.gpu / a))
             )?;
         }
         let sizes: Vec<String> = box_rows
@@ -579,15 +666,23 @@ pub fn run(args: &[String]) -> Result<()> {
             .map(|r| format!("{} bodies", r.bodies))
             .collect();
         let cb = crossover(
-            "box pass vs CPU all-pairs",
+            "GPU sort-and-sweep vs CPU sort-and-sweep",
             &sizes,
             &box_rows.iter().map(|r| r.cpu).collect::<Vec<_>>(),
             &box_rows.iter().map(|r| r.gpu).collect::<Vec<_>>(),
         );
         writeln!(md, "\n- {cb}")?;
     }
-    print!("\n{md}");
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
+    if o.boxes_only {
+        let md = format!("{}{}", &md[..header_len], &md[box_start..]);
+        print!("\n{md}");
+        let md_path = o.out.join("gpgpu-boxes.md");
+        std::fs::write(&md_path, &md).with_context(|| format!("writing {}", md_path.display()))?;
+        println!("\nwrote {}", md_path.display());
+        return Ok(());
+    }
+    print!("\n{md}");
     let md_path = o.out.join("gpgpu.md");
     std::fs::write(&md_path, &md).with_context(|| format!("writing {}", md_path.display()))?;
     let svg_path = o.out.join("gpgpu.svg");
