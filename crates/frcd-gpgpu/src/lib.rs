@@ -69,6 +69,6 @@ pub use context::{GpuContext, HeadlessOptions, requirements};
 pub use error::GpuError;
 pub use mesh::{ArenaOptions, GpuMesh};
 pub use pack::{MAX_MAGNITUDE, TexLayout};
-pub use query::{BodyPair, GpuBatch, GpuCollision, PendingBatch, QueryScratch};
+pub use query::{BodyPair, GpuBatch, GpuCollision, PendingBatch, QueryScratch, SubmittedBatch};
 /// The wgpu this crate is built on (to create a device for [`GpuContext::from_device`]).
 pub use wgpu;
