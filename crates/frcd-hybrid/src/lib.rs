@@ -95,6 +95,7 @@ mod error;
 mod exact;
 mod gpu;
 mod options;
+mod pipeline;
 mod rcs;
 mod report;
 mod state;
@@ -105,6 +106,7 @@ pub use error::{GpuFailure, HybridError};
 pub use frcd_obb::Containment;
 pub use frcd_tritri::Contact;
 pub use options::{Backend, BodySpec, GpuPolicy, Mode, Options};
+pub use pipeline::Pipeline;
 pub use report::{FrameResult, PairClearance, PairContact, Stage, StageBackend, StageReport, Via};
 pub use state::FrameState;
 
@@ -115,6 +117,7 @@ mod send_sync {
     fn types_are_send_sync() {
         assert::<crate::Checker>();
         assert::<crate::FrameState>();
+        assert::<crate::Pipeline>();
         assert::<crate::FrameResult>();
         assert::<crate::CostModel>();
     }
