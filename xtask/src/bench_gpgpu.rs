@@ -23,7 +23,14 @@
 //! the CPU sort-and-sweep (sort by min x, scan forward; the `World` broad phase's algorithm with
 //! a fresh sort, one thread), the GPU all-pairs pass (`overlapping_bodies_all_pairs`) and the GPU
 //! sort-and-sweep (`overlapping_bodies`: bitonic sort in WGSL, scan, one submission). The
-//! all-pairs columns are left out above 4,096 bodies. `--boxes-only` runs this section alone.
+//! all-pairs columns are left out above 4,096 bodies. `--boxes-only` runs this section alone
+//! (plus the checker section when asked for).
+//!
+//! Checker (`--checker-parts 16,64`, off by default): the many-body frames through
+//! `frcd_hybrid::Checker`, 8 distinct frames in sequence, time per frame: the CPU backend, the
+//! GPGPU backend with `check` (box pass and one pair batch per frame) and with
+//! `check_pipelined` (frame k+1's batch submitted before frame k is finished). Answers checked
+//! equal on every frame.
 //!
 //! The crossover (the smallest size where the GPU is faster) is printed for each comparison.
 //! Options: `--levels 1,2,3,4,5`, `--pairs K`, `--bodies 100,400,...`, `--runs N`, `--out DIR`.
@@ -45,6 +52,7 @@ struct Opts {
     runs: usize,
     out: PathBuf,
     boxes_only: bool,
+    checker: Vec<usize>,
 }
 
 fn parse(args: &[String]) -> Result<Opts> {
@@ -56,6 +64,7 @@ fn parse(args: &[String]) -> Result<Opts> {
         runs: 5,
         out: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bench"),
         boxes_only: false,
+        checker: Vec::new(),
     };
     let list = |s: Option<&String>| -> Result<Vec<u64>> {
         s.context("missing value")?
@@ -75,8 +84,11 @@ fn parse(args: &[String]) -> Result<Opts> {
             "--runs" => o.runs = it.next().context("--runs N")?.parse()?,
             "--out" => o.out = PathBuf::from(it.next().context("--out DIR")?),
             "--boxes-only" => o.boxes_only = true,
+            "--checker-parts" => {
+                o.checker = list(it.next())?.into_iter().map(|x| x as usize).collect()
+            }
             other => bail!(
-                "bench gpgpu: unknown option '{other}' (--levels L,.. --pairs K --bodies N,.. --frame-parts N,.. --runs N --out DIR --boxes-only)"
+                "bench gpgpu: unknown option '{other}' (--levels L,.. --pairs K --bodies N,.. --frame-parts N,.. --runs N --out DIR --boxes-only --checker-parts N,..)"
             ),
         }
     }
@@ -427,6 +439,11 @@ pub fn run(args: &[String]) -> Result<()> {
         });
     }
 
+    let mut checker_rows: Vec<CheckerRow> = Vec::new();
+    for &n in &o.checker {
+        checker_rows.push(checker_row(n, o.runs)?);
+    }
+
     let mut box_rows = Vec::new();
     let mut box_scratch = BoxScratch::default();
     let mut all_scratch = BoxScratch::default();
@@ -628,7 +645,33 @@ pub fn run(args: &[String]) -> Result<()> {
         );
         writeln!(md, "\n- {c1}\n- {cn}\n")?;
     }
-    let box_start = md.len();
+    let checker_start = md.len();
+    if !checker_rows.is_empty() {
+        writeln!(
+            md,
+            "## Checker frames: plain against pipelined (parts of 20k-55k triangles on a jittered grid, 8 distinct frames in sequence)\n"
+        )?;
+        writeln!(
+            md,
+            "| parts | triangles | contacts / frame | CPU backend ms / frame | GPGPU `check` ms / frame | GPGPU `check_pipelined` ms / frame | pipelined / plain | plain / CPU |"
+        )?;
+        writeln!(md, "|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+        for r in &checker_rows {
+            writeln!(
+                md,
+                "| {} | {} | {:.1} | {:.2} | {:.2} | {:.2} | {:.2}× | {:.2}× |",
+                r.parts,
+                r.triangles,
+                r.contacts,
+                r.cpu,
+                r.plain,
+                r.piped,
+                r.piped / r.plain,
+                r.plain / r.cpu
+            )?;
+        }
+        writeln!(md)?;
+    }
     if !box_rows.is_empty() {
         writeln!(
             md,
@@ -675,7 +718,7 @@ pub fn run(args: &[String]) -> Result<()> {
     }
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
     if o.boxes_only {
-        let md = format!("{}{}", &md[..header_len], &md[box_start..]);
+        let md = format!("{}{}", &md[..header_len], &md[checker_start..]);
         print!("\n{md}");
         let md_path = o.out.join("gpgpu-boxes.md");
         std::fs::write(&md_path, &md).with_context(|| format!("writing {}", md_path.display()))?;
@@ -758,4 +801,111 @@ fn plot(path: &std::path::Path, rows: &[PairRow], threads: usize, adapter: &str)
         .draw()?;
     root.present()?;
     Ok(())
+}
+
+struct CheckerRow {
+    parts: usize,
+    triangles: usize,
+    contacts: f64,
+    cpu: f64,
+    plain: f64,
+    piped: f64,
+}
+
+/// The checker section for `n` parts: per-frame time of a sequence of 8 frames, median of
+/// `runs` sequences, for the CPU backend, GPGPU `check` and GPGPU `check_pipelined`; answers
+/// checked equal frame by frame.
+fn checker_row(n: usize, runs: usize) -> Result<CheckerRow> {
+    use frcd_hybrid::{Backend, BodySpec, Checker, FrameState, GpuPolicy, Options, Pipeline};
+    let meshes: Vec<std::sync::Arc<frcd_geom::TriMesh>> = (0..n.min(4))
+        .map(|i| std::sync::Arc::new(frame_part(i)))
+        .collect();
+    let bodies: Vec<BodySpec> = (0..n)
+        .map(|i| BodySpec {
+            name: format!("part{i}"),
+            mesh: meshes[i % 4].clone(),
+            is_static: false,
+        })
+        .collect();
+    let triangles: usize = bodies.iter().map(|b| b.mesh.triangle_count()).sum();
+    let frames: Vec<Vec<Pose>> = (0..8).map(|f| frame_poses(n, f)).collect();
+    let gpu = Options {
+        backend: Backend::Gpgpu,
+        gpu: GpuPolicy::Require,
+        ..Options::default()
+    };
+    let cpu = Options {
+        backend: Backend::Cpu,
+        gpu: GpuPolicy::Off,
+        ..Options::default()
+    };
+    let c_cpu = Checker::new(bodies.clone(), &[], cpu)?;
+    let c_gpu = Checker::new(bodies.clone(), &[], gpu.clone())?;
+    let c_pipe = Checker::new(bodies, &[], gpu)?;
+    let key = |r: &frcd_hybrid::FrameResult| -> Vec<(usize, usize, Vec<(u32, u32)>)> {
+        r.contacts
+            .iter()
+            .map(|c| (c.a, c.b, c.pairs.clone()))
+            .collect()
+    };
+    // Correctness first (and warm-up): the three agree on every frame.
+    let mut contacts = 0usize;
+    {
+        let (mut s1, mut s2, mut pipe) = (
+            FrameState::default(),
+            FrameState::default(),
+            Pipeline::new(),
+        );
+        let mut piped = Vec::new();
+        for poses in &frames {
+            let a = c_cpu.check(poses, &mut s1)?;
+            let b = c_gpu.check(poses, &mut s2)?;
+            if key(&a) != key(&b) {
+                bail!("checker, {n} parts: GPGPU check differs from the CPU backend");
+            }
+            contacts += a.contacts.len();
+            piped.extend(c_pipe.check_pipelined(poses, &mut pipe)?);
+            if let Some(p) = piped.last() {
+                let k = piped.len() - 1;
+                if key(p) != key(&c_cpu.check(&frames[k], &mut FrameState::default())?) {
+                    bail!("checker, {n} parts: pipelined frame {k} differs");
+                }
+            }
+        }
+        piped.extend(c_pipe.flush_pipelined(&mut pipe)?);
+        if piped.len() != frames.len() {
+            bail!("checker: pipelined returned {} frames", piped.len());
+        }
+    }
+    let nf = frames.len() as f64;
+    let mut s1 = FrameState::default();
+    let cpu_ms = median_ms(runs, || {
+        for poses in &frames {
+            std::hint::black_box(c_cpu.check(poses, &mut s1).expect("checked"));
+        }
+    }) / nf;
+    let mut s2 = FrameState::default();
+    let plain = median_ms(runs, || {
+        for poses in &frames {
+            std::hint::black_box(c_gpu.check(poses, &mut s2).expect("checked"));
+        }
+    }) / nf;
+    let mut pipe = Pipeline::new();
+    let piped = median_ms(runs, || {
+        for poses in &frames {
+            std::hint::black_box(c_pipe.check_pipelined(poses, &mut pipe).expect("checked"));
+        }
+        std::hint::black_box(c_pipe.flush_pipelined(&mut pipe).expect("checked"));
+    }) / nf;
+    println!(
+        "checker, {n} parts ({triangles} triangles): cpu {cpu_ms:.2} ms, gpgpu check {plain:.2} ms, pipelined {piped:.2} ms per frame"
+    );
+    Ok(CheckerRow {
+        parts: n,
+        triangles,
+        contacts: contacts as f64 / nf,
+        cpu: cpu_ms,
+        plain,
+        piped,
+    })
 }
