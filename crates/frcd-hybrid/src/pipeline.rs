@@ -1,7 +1,7 @@
 //! Pipelined checking: the GPU traverses frame k+1 while the CPU finishes frame k.
 //!
 //! [`Checker::check_pipelined`] takes frame k+1's poses and returns frame k's answer (one frame
-//! of latency). Per call: frame k+1's rough colliding set is computed on a look-ahead broad
+//! of latency). Per call: frame k+1's overlapping body pairs are found on a look-ahead CPU broad
 //! phase and its GPU body pairs are **submitted** (one batch, one submission); then frame k's
 //! batch, submitted one call earlier, is read back and its touching pairs re-decided exactly on
 //! the CPU, and frame k runs through [`Checker::check`] with those answers (CPU pairs, solid
@@ -182,10 +182,29 @@ impl Checker {
         if pipe.ahead.world.is_none() || pipe.ahead.owner != self.serial {
             self.bind(&mut pipe.ahead, poses)?;
         }
-        let mut scratch_result = FrameResult::empty();
-        let (rcs, _) = self.rough_colliding_set(poses, &mut pipe.ahead, &mut scratch_result)?;
+        // The look-ahead broad phase runs on the CPU World whatever the backend: the box pass
+        // on the GPU would be one more blocking readback per frame. Only pairs whose raw boxes
+        // overlap can go to the GPU pair stage; they are the World's pairs at margin 0
+        // (exclusions and static pairs already filtered).
+        let world = pipe.ahead.world.as_mut().expect("bound above");
+        pipe.ahead.updates.clear();
+        pipe.ahead
+            .updates
+            .extend(pipe.ahead.ids.iter().copied().zip(poses.iter().copied()));
+        world.set_poses(&pipe.ahead.updates)?;
+        let mut overlapping: Vec<(u32, u32)> = world
+            .overlapping_pairs(0.0)
+            .into_iter()
+            .filter(|&(a, b)| match (world.body_aabb(a), world.body_aabb(b)) {
+                (Some(ba), Some(bb)) => ba.intersects(&bb),
+                _ => false,
+            })
+            .map(|(a, b)| (a.index().min(b.index()), a.index().max(b.index())))
+            .collect();
+        overlapping.sort_unstable();
         // Check reuses a pair's last answer when the pair was a candidate of the previous frame
-        // and both poses are unchanged.
+        // and both poses are unchanged (then its boxes overlapped then too: only overlapping
+        // pairs need remembering).
         let reused = |key: (u32, u32)| {
             pipe.prev.as_ref().is_some_and(|(p, keys)| {
                 keys.contains(&key)
@@ -193,12 +212,12 @@ impl Checker {
                     && p[key.1 as usize] == poses[key.1 as usize]
             })
         };
-        let keys: Vec<(u32, u32)> = rcs
+        let keys: Vec<(u32, u32)> = overlapping
             .iter()
-            .filter(|c| c.overlap && !reused(c.key) && self.wants_gpu_narrow(c.key))
-            .map(|c| c.key)
+            .copied()
+            .filter(|&k| !reused(k) && self.wants_gpu_narrow(k))
             .collect();
-        pipe.prev = Some((poses.to_vec(), rcs.iter().map(|c| c.key).collect()));
+        pipe.prev = Some((poses.to_vec(), overlapping.into_iter().collect()));
         if keys.is_empty() {
             return Ok(None);
         }
