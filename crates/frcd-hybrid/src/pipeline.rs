@@ -23,6 +23,10 @@ pub(crate) struct GpuAnswers {
     pub(crate) pairs: HashMap<(u32, u32), Vec<(u32, u32)>>,
 }
 
+/// A submitted frame's poses and overlapping body pairs.
+#[cfg(feature = "gpgpu")]
+type PrevFrame = (Vec<Pose>, HashSet<(u32, u32)>);
+
 /// A frame's GPU batch, submitted and not yet read.
 #[cfg(feature = "gpgpu")]
 #[derive(Debug)]
@@ -70,7 +74,7 @@ pub struct Pipeline {
     /// The previously submitted frame's poses and candidate pairs (whose answers the frame
     /// state will hold, so a pair with unchanged poses is reused, not recomputed).
     #[cfg(feature = "gpgpu")]
-    prev: Option<(Vec<Pose>, HashSet<(u32, u32)>)>,
+    prev: Option<PrevFrame>,
 }
 
 impl Pipeline {

@@ -16,7 +16,10 @@ fn gpu_required() -> bool {
 
 /// 24 bodies of three kinds moving through each other for 10 frames; frames 4 and 5 repeat
 /// frame 3's poses (answers reused), body 0 is static, one pair is excluded.
-fn scene() -> (Vec<BodySpec>, Vec<(usize, usize)>, Vec<Vec<Pose>>) {
+/// Bodies, excluded pairs, poses per frame.
+type Scene = (Vec<BodySpec>, Vec<(usize, usize)>, Vec<Vec<Pose>>);
+
+fn scene() -> Scene {
     let mut rng = StdRng::seed_from_u64(42);
     let meshes = [
         Arc::new(shapes::icosphere(1.0, 2)),
