@@ -18,8 +18,19 @@
 //! pool) or on the GPU (`GpuContext::collide_batch`: one dispatch chain, one submission, one
 //! readback per frame). Answers checked equal on every frame.
 //!
-//! Many bodies: `GpuContext::overlapping_bodies` against the CPU's all-pairs box test, by body
-//! count (1 to 4,096).
+//! Many bodies (`--bodies 1,16,256,1024,4096,16384`): the rough colliding set of n boxes scattered
+//! with about 4 neighbours each, by four methods, answers checked equal: the CPU all-pairs test,
+//! the CPU sort-and-sweep (sort by min x, scan forward; the `World` broad phase's algorithm with
+//! a fresh sort, one thread), the GPU all-pairs pass (`overlapping_bodies_all_pairs`) and the GPU
+//! sort-and-sweep (`overlapping_bodies`: bitonic sort in WGSL, scan, one submission). The
+//! all-pairs columns are left out above 4,096 bodies. `--boxes-only` runs this section alone
+//! (plus the checker section when asked for).
+//!
+//! Checker (`--checker-parts 16,64`, off by default): the many-body frames through
+//! `frcd_hybrid::Checker`, 8 distinct frames in sequence, time per frame: the CPU backend, the
+//! GPGPU backend with `check` (box pass and one pair batch per frame) and with
+//! `check_pipelined` (frame k+1's batch submitted before frame k is finished). Answers checked
+//! equal on every frame.
 //!
 //! The crossover (the smallest size where the GPU is faster) is printed for each comparison.
 //! Options: `--levels 1,2,3,4,5`, `--pairs K`, `--bodies 100,400,...`, `--runs N`, `--out DIR`.
@@ -52,7 +63,7 @@ pub struct Opts {
         long,
         value_name = "N,..",
         value_delimiter = ',',
-        default_value = "1,16,256,1024,4096"
+        default_value = "1,16,256,1024,4096,16384"
     )]
     pub bodies: Vec<usize>,
     /// Part counts of the many-body frames.
@@ -69,6 +80,13 @@ pub struct Opts {
     /// Folder for gpgpu.md and gpgpu.svg.
     #[arg(long, value_name = "DIR", default_value_os_t = crate::workspace_path("testdata/bench"))]
     pub out: PathBuf,
+    /// Only the many-body box pass (no pair queries, no frames).
+    #[arg(long)]
+    pub boxes_only: bool,
+    /// Part counts of the checker section (CPU backend, GPGPU `check`, `check_pipelined`);
+    /// empty: skipped.
+    #[arg(long = "checker-parts", value_name = "N,..", value_delimiter = ',')]
+    pub checker: Vec<usize>,
 }
 
 /// Median wall time in ms of `runs` calls (after one warm-up call).
@@ -169,8 +187,45 @@ fn broad_phase(trees: &[&ObbTree], poses: &[Pose]) -> Vec<(usize, usize)> {
 struct BoxRow {
     bodies: usize,
     pairs: usize,
+    /// CPU all-pairs (None above the all-pairs limit).
+    cpu_all: Option<f64>,
+    /// CPU sort-and-sweep, one thread.
     cpu: f64,
+    /// GPU all-pairs pass (None above the all-pairs limit).
+    gpu_all: Option<f64>,
+    /// GPU sort-and-sweep.
     gpu: f64,
+}
+
+/// Largest body count timed with the O(n²) methods.
+const ALL_PAIRS_LIMIT: usize = 4096;
+
+/// The CPU sort-and-sweep over boxes (the `World` broad phase's algorithm, fresh sort): sort by
+/// `min.x`, each box scans forward while the next `min.x` is within its `max.x`. Sorted pairs.
+fn cpu_sweep(boxes: &[Aabb]) -> Vec<(u32, u32)> {
+    let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
+    order.sort_unstable_by(|&a, &b| {
+        boxes[a as usize]
+            .min
+            .x
+            .total_cmp(&boxes[b as usize].min.x)
+            .then(a.cmp(&b))
+    });
+    let mut out = Vec::new();
+    for (p, &i) in order.iter().enumerate() {
+        let bi = &boxes[i as usize];
+        for &j in &order[p + 1..] {
+            let bj = &boxes[j as usize];
+            if bj.min.x > bi.max.x {
+                break;
+            }
+            if bi.intersects(bj) {
+                out.push((i.min(j), i.max(j)));
+            }
+        }
+    }
+    out.sort_unstable();
+    out
 }
 
 /// Body-pair poses of a step: B crossing A at `0.9 + 0.1 k / K` along a turning direction.
@@ -209,7 +264,11 @@ fn crossover(label: &str, sizes: &[String], cpu: &[f64], gpu: &[f64]) -> String 
 }
 
 /// Runs the suite.
-pub fn run(o: Opts) -> Result<()> {
+pub fn run(mut o: Opts) -> Result<()> {
+    if o.boxes_only {
+        o.levels.clear();
+        o.frames.clear();
+    }
     let load_start = load_average();
     let ctx = GpuContext::headless().context("bench gpgpu needs a GPU adapter")?;
     let info = ctx.adapter_info().clone();
@@ -370,8 +429,14 @@ pub fn run(o: Opts) -> Result<()> {
         });
     }
 
+    let mut checker_rows: Vec<CheckerRow> = Vec::new();
+    for &n in &o.checker {
+        checker_rows.push(checker_row(n, o.runs)?);
+    }
+
     let mut box_rows = Vec::new();
     let mut box_scratch = BoxScratch::default();
+    let mut all_scratch = BoxScratch::default();
     for &n in &o.bodies {
         // Bodies of size ~1 scattered in a cube holding about 4 neighbours each.
         let side = (n as f64 / 4.0).cbrt() * 2.0;
@@ -400,13 +465,36 @@ pub fn run(o: Opts) -> Result<()> {
             }
             out
         };
-        let want = cpu_pairs();
+        let small = n <= ALL_PAIRS_LIMIT;
+        let want = cpu_sweep(&boxes);
         let got = ctx.overlapping_bodies(&boxes, &mut box_scratch)?;
         if got.pairs != want {
-            bail!("{n} bodies: GPU box pairs differ from the CPU's");
+            bail!("{n} bodies: GPU sweep pairs differ from the CPU's");
         }
+        if small {
+            if cpu_pairs() != want {
+                bail!("{n} bodies: CPU sweep differs from CPU all-pairs");
+            }
+            let all = ctx.overlapping_bodies_all_pairs(&boxes, &mut all_scratch)?;
+            if all.pairs != want {
+                bail!("{n} bodies: GPU all-pairs pairs differ from the CPU's");
+            }
+        }
+        let cpu_all = small.then(|| {
+            median_ms(o.runs, || {
+                std::hint::black_box(cpu_pairs());
+            })
+        });
         let cpu = median_ms(o.runs, || {
-            std::hint::black_box(cpu_pairs());
+            std::hint::black_box(cpu_sweep(&boxes));
+        });
+        let gpu_all = small.then(|| {
+            median_ms(o.runs, || {
+                std::hint::black_box(
+                    ctx.overlapping_bodies_all_pairs(&boxes, &mut all_scratch)
+                        .expect("checked above"),
+                );
+            })
         });
         let gpu = median_ms(o.runs, || {
             std::hint::black_box(
@@ -415,13 +503,15 @@ pub fn run(o: Opts) -> Result<()> {
             );
         });
         println!(
-            "{n} bodies: {} pairs, cpu {cpu:.2} ms, gpu {gpu:.2} ms",
+            "{n} bodies: {} pairs, cpu all-pairs {cpu_all:?} ms, cpu sweep {cpu:.2} ms, gpu all-pairs {gpu_all:?} ms, gpu sweep {gpu:.2} ms",
             want.len()
         );
         box_rows.push(BoxRow {
             bodies: n,
             pairs: want.len(),
+            cpu_all,
             cpu,
+            gpu_all,
             gpu,
         });
     }
@@ -448,6 +538,7 @@ pub fn run(o: Opts) -> Result<()> {
              columns); no real GPU was available for this measurement.\n"
         )?;
     }
+    let header_len = md.len();
     writeln!(
         md,
         "## Pair queries ({} body pairs per step, all touching pairs, equal answers checked)\n",
@@ -544,6 +635,33 @@ pub fn run(o: Opts) -> Result<()> {
         );
         writeln!(md, "\n- {c1}\n- {cn}\n")?;
     }
+    let checker_start = md.len();
+    if !checker_rows.is_empty() {
+        writeln!(
+            md,
+            "## Checker frames: plain against pipelined (parts of 20k-55k triangles on a jittered grid, 8 distinct frames in sequence)\n"
+        )?;
+        writeln!(
+            md,
+            "| parts | triangles | contacts / frame | CPU backend ms / frame | GPGPU `check` ms / frame | GPGPU `check_pipelined` ms / frame | pipelined / plain | plain / CPU |"
+        )?;
+        writeln!(md, "|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+        for r in &checker_rows {
+            writeln!(
+                md,
+                "| {} | {} | {:.1} | {:.2} | {:.2} | {:.2} | {:.2}× | {:.2}× |",
+                r.parts,
+                r.triangles,
+                r.contacts,
+                r.cpu,
+                r.plain,
+                r.piped,
+                r.piped / r.plain,
+                r.plain / r.cpu
+            )?;
+        }
+        writeln!(md)?;
+    }
     if !box_rows.is_empty() {
         writeln!(
             md,
@@ -551,18 +669,29 @@ pub fn run(o: Opts) -> Result<()> {
         )?;
         writeln!(
             md,
-            "| bodies | overlapping pairs | CPU all-pairs ms | GPU ms (transfers incl.) | GPU / CPU |"
+            "Boxes scattered with about 4 neighbours each; every method's pairs checked equal. \
+             CPU columns on one thread; GPU columns include the upload, sort, sweep, readback, \
+             f64 re-check of uncertain pairs and the final sort of the pairs.\n"
         )?;
-        writeln!(md, "|---|---|---|---|---|")?;
+        writeln!(
+            md,
+            "| bodies | overlapping pairs | CPU all-pairs ms | CPU sort-and-sweep ms | GPU all-pairs ms | GPU sort-and-sweep ms | GPU sweep / CPU sweep | GPU sweep / GPU all-pairs |"
+        )?;
+        writeln!(md, "|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+        let opt = |x: Option<f64>| x.map_or("—".to_string(), |v| format!("{v:.2}"));
         for r in &box_rows {
             writeln!(
                 md,
-                "| {} | {} | {:.2} | {:.2} | {:.2} |",
+                "| {} | {} | {} | {:.2} | {} | {:.2} | {:.2}× | {} |",
                 r.bodies,
                 r.pairs,
+                opt(r.cpu_all),
                 r.cpu,
+                opt(r.gpu_all),
                 r.gpu,
-                r.gpu / r.cpu
+                r.gpu / r.cpu,
+                r.gpu_all
+                    .map_or("—".to_string(), |a| format!("{:.2}×", r.gpu / a))
             )?;
         }
         let sizes: Vec<String> = box_rows
@@ -570,15 +699,23 @@ pub fn run(o: Opts) -> Result<()> {
             .map(|r| format!("{} bodies", r.bodies))
             .collect();
         let cb = crossover(
-            "box pass vs CPU all-pairs",
+            "GPU sort-and-sweep vs CPU sort-and-sweep",
             &sizes,
             &box_rows.iter().map(|r| r.cpu).collect::<Vec<_>>(),
             &box_rows.iter().map(|r| r.gpu).collect::<Vec<_>>(),
         );
         writeln!(md, "\n- {cb}")?;
     }
-    print!("\n{md}");
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
+    if o.boxes_only {
+        let md = format!("{}{}", &md[..header_len], &md[checker_start..]);
+        print!("\n{md}");
+        let md_path = o.out.join("gpgpu-boxes.md");
+        std::fs::write(&md_path, &md).with_context(|| format!("writing {}", md_path.display()))?;
+        println!("\nwrote {}", md_path.display());
+        return Ok(());
+    }
+    print!("\n{md}");
     let md_path = o.out.join("gpgpu.md");
     std::fs::write(&md_path, &md).with_context(|| format!("writing {}", md_path.display()))?;
     let svg_path = o.out.join("gpgpu.svg");
@@ -655,4 +792,111 @@ mod tests {
             assert!(svg.contains(s), "{s} missing");
         }
     }
+}
+
+struct CheckerRow {
+    parts: usize,
+    triangles: usize,
+    contacts: f64,
+    cpu: f64,
+    plain: f64,
+    piped: f64,
+}
+
+/// The checker section for `n` parts: per-frame time of a sequence of 8 frames, median of
+/// `runs` sequences, for the CPU backend, GPGPU `check` and GPGPU `check_pipelined`; answers
+/// checked equal frame by frame.
+fn checker_row(n: usize, runs: usize) -> Result<CheckerRow> {
+    use frcd_hybrid::{Backend, BodySpec, Checker, FrameState, GpuPolicy, Options, Pipeline};
+    let meshes: Vec<std::sync::Arc<frcd_geom::TriMesh>> = (0..n.min(4))
+        .map(|i| std::sync::Arc::new(frame_part(i)))
+        .collect();
+    let bodies: Vec<BodySpec> = (0..n)
+        .map(|i| BodySpec {
+            name: format!("part{i}"),
+            mesh: meshes[i % 4].clone(),
+            is_static: false,
+        })
+        .collect();
+    let triangles: usize = bodies.iter().map(|b| b.mesh.triangle_count()).sum();
+    let frames: Vec<Vec<Pose>> = (0..8).map(|f| frame_poses(n, f)).collect();
+    let gpu = Options {
+        backend: Backend::Gpgpu,
+        gpu: GpuPolicy::Require,
+        ..Options::default()
+    };
+    let cpu = Options {
+        backend: Backend::Cpu,
+        gpu: GpuPolicy::Off,
+        ..Options::default()
+    };
+    let c_cpu = Checker::new(bodies.clone(), &[], cpu)?;
+    let c_gpu = Checker::new(bodies.clone(), &[], gpu.clone())?;
+    let c_pipe = Checker::new(bodies, &[], gpu)?;
+    let key = |r: &frcd_hybrid::FrameResult| -> Vec<(usize, usize, Vec<(u32, u32)>)> {
+        r.contacts
+            .iter()
+            .map(|c| (c.a, c.b, c.pairs.clone()))
+            .collect()
+    };
+    // Correctness first (and warm-up): the three agree on every frame.
+    let mut contacts = 0usize;
+    {
+        let (mut s1, mut s2, mut pipe) = (
+            FrameState::default(),
+            FrameState::default(),
+            Pipeline::new(),
+        );
+        let mut piped = Vec::new();
+        for poses in &frames {
+            let a = c_cpu.check(poses, &mut s1)?;
+            let b = c_gpu.check(poses, &mut s2)?;
+            if key(&a) != key(&b) {
+                bail!("checker, {n} parts: GPGPU check differs from the CPU backend");
+            }
+            contacts += a.contacts.len();
+            piped.extend(c_pipe.check_pipelined(poses, &mut pipe)?);
+            if let Some(p) = piped.last() {
+                let k = piped.len() - 1;
+                if key(p) != key(&c_cpu.check(&frames[k], &mut FrameState::default())?) {
+                    bail!("checker, {n} parts: pipelined frame {k} differs");
+                }
+            }
+        }
+        piped.extend(c_pipe.flush_pipelined(&mut pipe)?);
+        if piped.len() != frames.len() {
+            bail!("checker: pipelined returned {} frames", piped.len());
+        }
+    }
+    let nf = frames.len() as f64;
+    let mut s1 = FrameState::default();
+    let cpu_ms = median_ms(runs, || {
+        for poses in &frames {
+            std::hint::black_box(c_cpu.check(poses, &mut s1).expect("checked"));
+        }
+    }) / nf;
+    let mut s2 = FrameState::default();
+    let plain = median_ms(runs, || {
+        for poses in &frames {
+            std::hint::black_box(c_gpu.check(poses, &mut s2).expect("checked"));
+        }
+    }) / nf;
+    let mut pipe = Pipeline::new();
+    let piped = median_ms(runs, || {
+        for poses in &frames {
+            std::hint::black_box(c_pipe.check_pipelined(poses, &mut pipe).expect("checked"));
+        }
+        std::hint::black_box(c_pipe.flush_pipelined(&mut pipe).expect("checked"));
+    }) / nf;
+    println!(
+        "checker, {n} parts ({triangles} triangles): cpu {cpu_ms:.2} ms, gpgpu check {plain:.2} ms, pipelined {piped:.2} ms per frame"
+    );
+    Ok(CheckerRow {
+        parts: n,
+        triangles,
+        contacts: contacts as f64 / nf,
+        cpu: cpu_ms,
+        plain,
+        piped,
+    })
 }

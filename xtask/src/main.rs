@@ -210,7 +210,8 @@ mod tests {
             panic!()
         };
         assert_eq!(o.levels, [1, 2, 3, 4, 5]);
-        assert_eq!(o.bodies, [1, 16, 256, 1024, 4096]);
+        assert_eq!(o.bodies, [1, 16, 256, 1024, 4096, 16384]);
+        assert!(!o.boxes_only);
         assert_eq!(o.frames, [2, 8, 64]);
         assert_eq!((o.pairs, o.runs), (8, 5));
         assert!(o.out.ends_with("testdata/bench"));
@@ -224,6 +225,22 @@ mod tests {
         assert_eq!(o.levels, [2, 3]);
         assert_eq!(o.bodies, [100, 400]);
         assert_eq!((o.pairs, o.runs), (2, 1));
+        let Task::Bench {
+            suite: Suite::Gpgpu(o),
+        } = parse("bench gpgpu --boxes-only --bodies 16384")
+        else {
+            panic!()
+        };
+        assert!(o.boxes_only);
+        assert_eq!(o.bodies, [16384]);
+        assert!(o.checker.is_empty());
+        let Task::Bench {
+            suite: Suite::Gpgpu(o),
+        } = parse("bench gpgpu --checker-parts 16,64")
+        else {
+            panic!()
+        };
+        assert_eq!(o.checker, [16, 64]);
         assert!(refused("bench gpgpu --pairs 0").contains("at least 1"));
     }
 

@@ -4,8 +4,8 @@ use crate::{GpuContext, GpuError};
 use frcd_geom::Aabb;
 use frcd_gpu::layout::{BodyBox, BoxParams};
 
-const UNCERTAIN_FLAG: u32 = 0x8000_0000;
-const MAX_RERUNS: u32 = 32;
+pub(crate) const UNCERTAIN_FLAG: u32 = 0x8000_0000;
+pub(crate) const MAX_RERUNS: u32 = 32;
 
 /// The answer of [`GpuContext::overlapping_bodies`].
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -32,10 +32,13 @@ struct BoxBuffers {
     bind: wgpu::BindGroup,
 }
 
-/// Caller-owned buffers of [`GpuContext::overlapping_bodies`], grown as needed.
+/// Caller-owned buffers of [`GpuContext::overlapping_bodies`] (and of the all-pairs form),
+/// sized by capacity, grown as needed and kept for the next frame; tied to the first context it
+/// is used with.
 pub struct BoxScratch {
-    output_cap: u32,
+    pub(crate) output_cap: u32,
     bufs: Option<BoxBuffers>,
+    pub(crate) sweep: Option<crate::sweep::SweepBuffers>,
 }
 
 impl Default for BoxScratch {
@@ -58,6 +61,7 @@ impl BoxScratch {
         Self {
             output_cap: output.max(1),
             bufs: None,
+            sweep: None,
         }
     }
 
@@ -127,7 +131,7 @@ impl BoxScratch {
 
 /// The prelude's `BodyBox`: outer corners (rounded outward) and inner ones (rounded inward), as
 /// boxes.wgsl compares them.
-fn body_box(b: &Aabb) -> BodyBox {
+pub(crate) fn body_box(b: &Aabb) -> BodyBox {
     let (lo, hi) = (b.min, b.max);
     BodyBox {
         lo_dn: [round_down(lo.x), round_down(lo.y), round_down(lo.z), 0.0],
@@ -138,12 +142,11 @@ fn body_box(b: &Aabb) -> BodyBox {
 }
 
 impl GpuContext {
-    /// Every pair of bodies whose world boxes overlap (closed boxes), computed on the GPU over
-    /// all pairs in f32 with directed rounding; pairs the f32 comparison cannot decide are
-    /// re-checked in f64, so the answer equals the f64 all-pairs test ([`Aabb::intersects`]).
+    /// The all-pairs form of [`GpuContext::overlapping_bodies`] (O(n²) comparisons, tiled in
+    /// workgroup memory): the same answer, kept as a reference and for small counts.
     /// One submission and one readback (plus one per output overflow). Boxes with NaN are an
     /// error; empty boxes overlap nothing.
-    pub fn overlapping_bodies(
+    pub fn overlapping_bodies_all_pairs(
         &self,
         boxes: &[Aabb],
         scratch: &mut BoxScratch,
@@ -212,23 +215,38 @@ impl GpuContext {
             }
             break (count as usize, words);
         };
-        let mut pairs = Vec::with_capacity(count);
-        for e in entries[2..2 + 2 * count].chunks_exact(2) {
-            let (i, tag) = (e[0], e[1]);
-            let j = tag & !UNCERTAIN_FLAG;
-            if i as usize >= n || j as usize >= n || i >= j {
-                return Err(GpuError::Internal(format!("body pair ({i}, {j}) invalid")));
-            }
-            if tag & UNCERTAIN_FLAG != 0 {
-                answer.uncertain += 1;
-                if !boxes[i as usize].intersects(&boxes[j as usize]) {
-                    continue;
-                }
-            }
-            pairs.push((i, j));
-        }
-        pairs.sort_unstable();
-        answer.pairs = pairs;
+        decode(boxes, &entries[2..2 + 2 * count], &mut answer)?;
         Ok(answer)
     }
+}
+
+/// Decodes the GPU's `(i, j | flag)` entries into `answer.pairs` (sorted): flagged pairs are
+/// re-checked in f64.
+pub(crate) fn decode(
+    boxes: &[Aabb],
+    entries: &[u32],
+    answer: &mut BodyPairs,
+) -> Result<(), GpuError> {
+    let n = boxes.len();
+    let mut pairs = Vec::with_capacity(entries.len() / 2);
+    for e in entries.chunks_exact(2) {
+        let (i, tag) = (e[0], e[1]);
+        let j = tag & !UNCERTAIN_FLAG;
+        if i as usize >= n || j as usize >= n || i >= j {
+            return Err(GpuError::Internal(format!("body pair ({i}, {j}) invalid")));
+        }
+        if tag & UNCERTAIN_FLAG != 0 {
+            answer.uncertain += 1;
+            if !boxes[i as usize].intersects(&boxes[j as usize]) {
+                continue;
+            }
+        }
+        pairs.push((i, j));
+    }
+    pairs.sort_unstable();
+    if pairs.windows(2).any(|w| w[0] == w[1]) {
+        return Err(GpuError::Internal("a body pair was reported twice".into()));
+    }
+    answer.pairs = pairs;
+    Ok(())
 }

@@ -65,6 +65,9 @@ pub(crate) struct Pipelines {
     pub init: wgpu::ComputePipeline,
     pub prepare: wgpu::ComputePipeline,
     pub boxes: wgpu::ComputePipeline,
+    pub sweep_bgl: wgpu::BindGroupLayout,
+    /// sweep.wgsl's passes: keys, sort_local, sort_global, gather, sweep.
+    pub sweep: [wgpu::ComputePipeline; 5],
 }
 
 /// A device and queue with frcd-gpgpu's pipelines, plus counters of submissions and readbacks.
@@ -421,6 +424,27 @@ impl Pipelines {
                 uniform(3),
             ],
         );
+        let sweep_bgl = bgl(
+            "frcd-gpgpu sweep",
+            &[
+                storage(0, true),
+                storage(1, false),
+                storage(2, false),
+                uniform(3),
+                storage(4, false),
+                storage(5, false),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 6,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: true,
+                        min_binding_size: std::num::NonZeroU64::new(16),
+                    },
+                    count: None,
+                },
+            ],
+        );
         let module = |label: &str, src: &str| {
             device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(label),
@@ -430,6 +454,7 @@ impl Pipelines {
         let traverse_mod = module("traverse.wgsl", shaders::TRAVERSE);
         let control_mod = module("control.wgsl", shaders::CONTROL);
         let boxes_mod = module("boxes.wgsl", shaders::BOXES);
+        let sweep_mod = module("sweep.wgsl", shaders::SWEEP);
         let layout = |label: &str, groups: &[&wgpu::BindGroupLayout]| {
             let groups: Vec<Option<&wgpu::BindGroupLayout>> =
                 groups.iter().map(|g| Some(*g)).collect();
@@ -442,6 +467,7 @@ impl Pipelines {
         let trav_layout = layout("frcd-gpgpu traverse", &[&arena_bgl, &trav_bgl]);
         let ctrl_layout = layout("frcd-gpgpu control", &[&ctrl_bgl]);
         let boxes_layout = layout("frcd-gpgpu boxes", &[&boxes_bgl]);
+        let sweep_layout = layout("frcd-gpgpu sweep", &[&sweep_bgl]);
         let pipeline = |label: &str,
                         layout: &wgpu::PipelineLayout,
                         module: &wgpu::ShaderModule,
@@ -465,6 +491,9 @@ impl Pipelines {
             init: pipeline("frcd-gpgpu init", &ctrl_layout, &control_mod, "init"),
             prepare: pipeline("frcd-gpgpu prepare", &ctrl_layout, &control_mod, "prepare"),
             boxes: pipeline("frcd-gpgpu boxes", &boxes_layout, &boxes_mod, "overlap"),
+            sweep: ["make_keys", "sort_local", "sort_global", "gather", "sweep"]
+                .map(|entry| pipeline("frcd-gpgpu sweep", &sweep_layout, &sweep_mod, entry)),
+            sweep_bgl,
             arena_bgl,
             trav_bgl,
             ctrl_bgl,

@@ -23,8 +23,11 @@
 //! - Output and frontier buffers have capacities; an overflow is detected on the GPU (the
 //!   append counter runs past the capacity) and the query is re-run with larger buffers — the
 //!   answer is never truncated.
-//! - [`GpuContext::overlapping_bodies`]: all-pairs box overlap of many bodies' world boxes on the
-//!   GPU (the hybrid scheduler's rough colliding set), equal to the f64 answer.
+//! - [`GpuContext::overlapping_bodies`]: the box overlap of many bodies' world boxes on the GPU
+//!   (the hybrid scheduler's rough colliding set) by sort-based sweep and prune in
+//!   O(n log n + pairs): a bitonic sort of the box minima on the axis of largest spread, then
+//!   each box scans forward while the next minimum is within its maximum. Equal to the f64
+//!   all-pairs answer ([`GpuContext::overlapping_bodies_all_pairs`] is the O(n²) form).
 //!
 //! Numbers: the GPU computes in f32 relative to each body's local origin; every f32 quantity that
 //! could drop a candidate carries a computed error bound that holds under WGSL's float rules
@@ -59,12 +62,13 @@ pub mod pack;
 mod query;
 #[doc(hidden)]
 pub mod shaders;
+mod sweep;
 
 pub use boxes::{BodyPairs, BoxScratch};
 pub use context::{GpuContext, HeadlessOptions, requirements};
 pub use error::GpuError;
 pub use mesh::{ArenaOptions, GpuMesh};
 pub use pack::{MAX_MAGNITUDE, TexLayout};
-pub use query::{BodyPair, GpuBatch, GpuCollision, PendingBatch, QueryScratch};
+pub use query::{BodyPair, GpuBatch, GpuCollision, PendingBatch, QueryScratch, SubmittedBatch};
 /// The wgpu this crate is built on (to create a device for [`GpuContext::from_device`]).
 pub use wgpu;

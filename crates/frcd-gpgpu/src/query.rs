@@ -288,6 +288,39 @@ impl PendingBatch<'_> {
     }
 }
 
+/// A batch frcd-gpgpu submitted on its own ([`GpuContext::submit_batch`]) and has not read back
+/// yet: owned (no borrow of the context or scratch), so it can be kept across frames while the
+/// caller works, e.g. the CPU deciding frame k while the GPU traverses frame k+1.
+/// [`GpuContext::resolve_batch`] reads it (waiting on its own submission only) and gives the
+/// scratch back. Dropping it unresolved is allowed (the work is discarded).
+#[must_use = "a submitted batch is read by GpuContext::resolve_batch"]
+pub struct SubmittedBatch {
+    ctx_id: u64,
+    prepared: Prepared,
+    scratch: QueryScratch,
+    index: wgpu::SubmissionIndex,
+}
+
+impl std::fmt::Debug for SubmittedBatch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SubmittedBatch")
+            .field("pairs", &self.prepared.frames.len())
+            .finish()
+    }
+}
+
+impl SubmittedBatch {
+    /// Body pairs in the batch.
+    pub fn len(&self) -> usize {
+        self.prepared.frames.len()
+    }
+
+    /// True for a batch of no pairs.
+    pub fn is_empty(&self) -> bool {
+        self.prepared.frames.is_empty()
+    }
+}
+
 impl GpuContext {
     /// Every touching triangle pair of two uploaded meshes at two poses (surface mode), equal to
     /// [`frcd_obb::oracle::pairs`]. A batch of one ([`GpuContext::collide_batch`]): one
@@ -357,6 +390,81 @@ impl GpuContext {
             scratch,
             prepared,
         })
+    }
+
+    /// Records and submits a batch now (one submission) and returns it unread: the GPU works
+    /// while the caller does something else; [`GpuContext::resolve_batch`] reads it. `scratch`
+    /// moves into the batch and comes back from `resolve_batch` (keep two to have one batch in
+    /// flight while the previous one is read). Each result equals
+    /// [`frcd_obb::oracle::pairs`] for its pair, as with [`GpuContext::collide_batch`].
+    ///
+    /// ```no_run
+    /// # use frcd_gpgpu::{GpuContext, QueryScratch};
+    /// # use frcd_obb::{BuildOptions, ObbTree};
+    /// # use frcd_geom::{shapes, DVec3, Pose};
+    /// let ctx = GpuContext::headless()?;
+    /// let m = ctx.upload(&ObbTree::build(&shapes::icosphere(1.0, 3), &BuildOptions::default()))?;
+    /// let (p, q) = (Pose::IDENTITY, Pose::from_translation(DVec3::X));
+    /// let next = ctx.submit_batch(&[(&m, &p, &m, &q)], QueryScratch::default())?;
+    /// // ... CPU work of the previous frame here ...
+    /// let (frame, _scratch) = ctx.resolve_batch(next)?;
+    /// assert!(frame.results[0].collide());
+    /// # Ok::<(), frcd_gpgpu::GpuError>(())
+    /// ```
+    pub fn submit_batch(
+        &self,
+        pairs: &[BodyPair<'_>],
+        mut scratch: QueryScratch,
+    ) -> Result<SubmittedBatch, GpuError> {
+        let prepared = self.prepare(pairs)?;
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("frcd-gpgpu batch"),
+            });
+        if !prepared.frames.is_empty() {
+            self.record(&mut enc, &prepared, &mut scratch)?;
+        }
+        let index = self.submit(enc.finish());
+        Ok(SubmittedBatch {
+            ctx_id: self.id,
+            prepared,
+            scratch,
+            index,
+        })
+    }
+
+    /// Reads a batch of [`GpuContext::submit_batch`] (waiting on its submission only; re-runs
+    /// on overflow as [`GpuContext::collide_batch`] does) and returns the answer and the
+    /// scratch. A batch of another context is [`GpuError::ForeignObject`].
+    pub fn resolve_batch(
+        &self,
+        batch: SubmittedBatch,
+    ) -> Result<(GpuBatch, QueryScratch), GpuError> {
+        if batch.ctx_id != self.id {
+            return Err(GpuError::ForeignObject("SubmittedBatch"));
+        }
+        let SubmittedBatch {
+            prepared,
+            mut scratch,
+            index,
+            ..
+        } = batch;
+        if prepared.frames.is_empty() {
+            return Ok((
+                GpuBatch {
+                    submissions: 1,
+                    ..GpuBatch::default()
+                },
+                scratch,
+            ));
+        }
+        let mut answer = GpuBatch {
+            submissions: 1,
+            ..GpuBatch::default()
+        };
+        let out = self.run(&prepared, &mut scratch, &mut answer, Some(index))?;
+        Ok((out, scratch))
     }
 
     fn prepare(&self, pairs: &[BodyPair<'_>]) -> Result<Prepared, GpuError> {

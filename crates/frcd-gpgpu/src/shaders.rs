@@ -7,9 +7,13 @@ pub const CONTROL: &str = include_str!("../shaders/control.wgsl");
 /// All-pairs box overlap of many bodies.
 pub const BOXES: &str = include_str!("../shaders/boxes.wgsl");
 
+/// Sort-based sweep and prune over many bodies' boxes (bitonic sort, gather, sweep).
+pub const SWEEP: &str = include_str!("../shaders/sweep.wgsl");
+
 /// Every shader of the crate as `(file name, source)`.
-pub const ALL: [(&str, &str); 3] = [
+pub const ALL: [(&str, &str); 4] = [
     ("traverse.wgsl", TRAVERSE),
     ("control.wgsl", CONTROL),
     ("boxes.wgsl", BOXES),
+    ("sweep.wgsl", SWEEP),
 ];

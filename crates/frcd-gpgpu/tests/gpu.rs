@@ -448,6 +448,64 @@ fn a_batch_recorded_into_the_callers_encoder() {
     }
 }
 
+/// Issue 10 item 2: two batches in flight (frame k+1 submitted before frame k is read), each
+/// equal to the oracle; overflow re-runs happen at resolve time.
+#[test]
+fn submitted_batches_overlap_and_resolve_in_order() {
+    let Some(ctx) = new_context() else { return };
+    let a = body(&ctx, shapes::icosphere(1.0, 3));
+    let frames: Vec<Vec<Pose>> = (0..4)
+        .map(|f| {
+            (0..5)
+                .map(|k| {
+                    Pose::from_translation(DVec3::new(0.3 * k as f64 + 0.05 * f as f64, 0.1, 0.0))
+                })
+                .collect()
+        })
+        .collect();
+    let batch = |f: usize| -> Vec<_> {
+        (0..4)
+            .map(|k| (&a.gpu, &frames[f][0], &a.gpu, &frames[f][k + 1]))
+            .collect()
+    };
+    let check = |f: usize, got: &frcd_gpgpu::GpuBatch| {
+        assert_eq!(got.results.len(), 4);
+        for (k, r) in got.results.iter().enumerate() {
+            let want = oracle::pairs(&a.mesh, &frames[f][0], &a.mesh, &frames[f][k + 1]);
+            assert_eq!(r.pairs, want, "frame {f} pair {k}");
+        }
+    };
+    // Tiny buffers: the first resolve re-runs after an overflow.
+    let mut spare = Some(QueryScratch::with_capacity(2, 2));
+    let mut in_flight = Some(
+        ctx.submit_batch(&batch(0), QueryScratch::default())
+            .unwrap(),
+    );
+    for f in 1..frames.len() {
+        let s0 = ctx.submissions();
+        let next = ctx.submit_batch(&batch(f), spare.take().unwrap()).unwrap();
+        assert_eq!(ctx.submissions() - s0, 1);
+        assert_eq!(next.len(), 4);
+        let (got, scratch) = ctx.resolve_batch(in_flight.take().unwrap()).unwrap();
+        check(f - 1, &got);
+        assert_eq!(got.submissions, 1 + got.reruns);
+        spare = Some(scratch);
+        in_flight = Some(next);
+    }
+    let (got, _) = ctx.resolve_batch(in_flight.take().unwrap()).unwrap();
+    check(frames.len() - 1, &got);
+    let empty = ctx.submit_batch(&[], QueryScratch::default()).unwrap();
+    assert!(empty.is_empty());
+    assert!(ctx.resolve_batch(empty).unwrap().0.results.is_empty());
+    if let Some(other) = new_context() {
+        let theirs = other.submit_batch(&[], QueryScratch::default()).unwrap();
+        assert!(matches!(
+            ctx.resolve_batch(theirs),
+            Err(GpuError::ForeignObject("SubmittedBatch"))
+        ));
+    }
+}
+
 #[test]
 fn objects_of_another_context_are_refused() {
     let Some(ctx) = shared() else { return };

@@ -55,8 +55,14 @@ struct BodyBox {
 }
 
 struct BoxParams {
-    // body count, output capacity, unused, unused
+    // body count, output capacity, then per pass: unused (boxes.wgsl) or the padded count
+    // (sweep.wgsl), unused
     n: vec4<u32>,
+}
+
+// One step of sweep.wgsl's bitonic sort: k, j, unused, unused (k = 0: a block's whole presort).
+struct SortStage {
+    kj: vec4<u32>,
 }
 
 // ---- frcd-image (raster.wgsl, resolve.wgsl) ----

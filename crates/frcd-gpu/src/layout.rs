@@ -79,8 +79,18 @@ pub struct BodyBox {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
 pub struct BoxParams {
-    /// Body count, output capacity, unused, unused.
+    /// Body count, output capacity, padded count (the sweep; unused by the all-pairs pass),
+    /// unused.
     pub n: [u32; 4],
+}
+
+/// `SortStage`: one step `(k, j)` of the box sweep's bitonic sort (`k = 0`: a block's whole
+/// presort); bound with a dynamic offset, one per dispatch.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct SortStage {
+    /// `k`, `j`, unused, unused.
+    pub kj: [u32; 4],
 }
 
 /// `Draw`: frcd-image's clip-from-local matrix (column-major).
@@ -156,6 +166,7 @@ pub fn mirrors() -> Vec<MirrorLayout> {
             hi_dn: [f32; 4]
         }),
         m!(BoxParams { n: [u32; 4] }),
+        m!(SortStage { kj: [u32; 4] }),
         m!(Draw {
             clip_from_local: [[f32; 4]; 4]
         }),

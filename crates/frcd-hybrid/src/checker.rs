@@ -31,7 +31,7 @@ pub(crate) struct BodyInfo {
 #[derive(Debug)]
 pub struct Checker {
     /// Identifies the checker to its frame states.
-    serial: u64,
+    pub(crate) serial: u64,
     pub(crate) pool: Option<Arc<rayon::ThreadPool>>,
     pub(crate) bodies: Vec<BodyInfo>,
     pub(crate) meshes: Vec<Arc<TriMesh>>,
@@ -366,7 +366,7 @@ impl Checker {
 
     /// Binds a fresh state to this checker: a World holding every body, its exclusions and
     /// clearance thresholds.
-    fn bind(&self, state: &mut FrameState, poses: &[Pose]) -> Result<(), HybridError> {
+    pub(crate) fn bind(&self, state: &mut FrameState, poses: &[Pose]) -> Result<(), HybridError> {
         let mut world = World::new(WorldOptions::default());
         let ids = self
             .bodies

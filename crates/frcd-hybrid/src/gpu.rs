@@ -193,8 +193,27 @@ impl Checker {
         Ok(Image { det, meshes })
     }
 
-    /// Exact mode: the GPU pair traversal for the pairs the cost model gives it. Returns how
-    /// many pairs it answered; on a GPU error the remaining pairs stay on the CPU.
+    /// True when body pair `key`, computed fresh in exact mode, goes to the GPU pair traversal
+    /// (a GPU in use and the backend or the cost model choosing it for its triangle count).
+    #[cfg(feature = "gpgpu")]
+    pub(crate) fn wants_gpu_narrow(&self, key: (u32, u32)) -> bool {
+        let o = &self.options;
+        if self.gpgpu.is_none() || o.mode != Mode::Exact {
+            return false;
+        }
+        let (ma, mb) = (
+            self.bodies[key.0 as usize].mesh,
+            self.bodies[key.1 as usize].mesh,
+        );
+        let tris = self.meshes[ma].triangle_count() + self.meshes[mb].triangle_count();
+        o.backend == Backend::Gpgpu || o.cost.prefer_gpu_narrow(tris)
+    }
+
+    /// Exact mode: the GPU pair traversal for the pairs the cost model gives it, all in **one**
+    /// batch (one submission, one readback: [`frcd_gpgpu::GpuContext::collide_batch`]). Pairs a
+    /// pipelined run already answered for these poses ([`crate::Pipeline`]) are taken from its
+    /// answers. Returns how many pairs the GPU answered; on a GPU error the pairs stay on the
+    /// CPU.
     #[cfg(feature = "gpgpu")]
     pub(crate) fn gpu_pair_queries(
         &self,
@@ -203,37 +222,60 @@ impl Checker {
         state: &mut FrameState,
         result: &mut FrameResult,
     ) -> Result<usize, HybridError> {
-        let o = &self.options;
-        let Some(g) = self.gpgpu.as_ref().filter(|_| o.mode == Mode::Exact) else {
+        let mut answered = state.gpu_answers.take().filter(|a| a.poses == poses);
+        let Some(g) = self
+            .gpgpu
+            .as_ref()
+            .filter(|_| self.options.mode == Mode::Exact)
+        else {
             return Ok(0);
         };
         let _ = Via::Gpu;
         let mut gpu_pairs = 0;
-        for job in work.iter_mut().filter(|j| j.plan == Plan::Cpu) {
-            let (ia, ib) = (job.key.0 as usize, job.key.1 as usize);
-            let (ma, mb) = (self.bodies[ia].mesh, self.bodies[ib].mesh);
-            let tris = self.meshes[ma].triangle_count() + self.meshes[mb].triangle_count();
-            if o.backend != Backend::Gpgpu && !o.cost.prefer_gpu_narrow(tris) {
+        let mut batch_jobs = Vec::new();
+        for (i, job) in work.iter_mut().enumerate() {
+            if job.plan != Plan::Cpu || !self.wants_gpu_narrow(job.key) {
                 continue;
             }
-            match g.ctx.collide(
-                &g.meshes[ma],
-                &poses[ia],
-                &g.meshes[mb],
-                &poses[ib],
-                &mut state.gpu_query,
-            ) {
-                Ok(hit) => {
-                    job.plan = Plan::GpuDone(hit.pairs);
+            match answered.as_mut().and_then(|a| a.pairs.remove(&job.key)) {
+                Some(pairs) => {
+                    job.plan = Plan::GpuDone(pairs);
                     gpu_pairs += 1;
                 }
-                Err(e) => {
-                    self.gpu_failed("pair query", e.into(), result)?;
-                    break;
-                }
+                None => batch_jobs.push(i),
             }
         }
+        if batch_jobs.is_empty() {
+            return Ok(gpu_pairs);
+        }
+        let items: Vec<frcd_gpgpu::BodyPair<'_>> = batch_jobs
+            .iter()
+            .map(|&i| {
+                let (ia, ib) = (work[i].key.0 as usize, work[i].key.1 as usize);
+                let (ma, mb) = (self.bodies[ia].mesh, self.bodies[ib].mesh);
+                (&g.meshes[ma], &poses[ia], &g.meshes[mb], &poses[ib])
+            })
+            .collect();
+        match g.ctx.collide_batch(&items, &mut state.gpu_query) {
+            Ok(batch) => {
+                for (&i, r) in batch_jobs.iter().zip(batch.results) {
+                    work[i].plan = Plan::GpuDone(r.pairs);
+                    gpu_pairs += 1;
+                }
+            }
+            Err(e) => self.gpu_failed("pair query", e.into(), result)?,
+        }
         Ok(gpu_pairs)
+    }
+
+    /// Command-buffer submissions made on the checker's GPGPU device so far (0 without one):
+    /// one per frame that sends pairs to the GPU, plus one per buffer overflow re-run.
+    pub fn gpu_submissions(&self) -> u64 {
+        #[cfg(feature = "gpgpu")]
+        if let Some(g) = &self.gpgpu {
+            return g.ctx.submissions();
+        }
+        0
     }
 
     /// Without the `gpgpu` feature no pair runs on the GPU.

@@ -100,6 +100,7 @@ mod error;
 mod exact;
 mod gpu;
 mod options;
+mod pipeline;
 mod rcs;
 mod report;
 mod state;
@@ -110,6 +111,7 @@ pub use error::{GpuFailure, HybridError};
 pub use frcd_obb::Containment;
 pub use frcd_tritri::Contact;
 pub use options::{Backend, BodySpec, GpuPolicy, Mode, Options};
+pub use pipeline::Pipeline;
 pub use report::{FrameResult, PairClearance, PairContact, Stage, StageBackend, StageReport, Via};
 pub use state::FrameState;
 
@@ -120,6 +122,7 @@ mod send_sync {
     fn types_are_send_sync() {
         assert::<crate::Checker>();
         assert::<crate::FrameState>();
+        assert::<crate::Pipeline>();
         assert::<crate::FrameResult>();
         assert::<crate::CostModel>();
     }

@@ -60,6 +60,9 @@ pub struct FrameState {
     pub(crate) gpu_query: frcd_gpgpu::QueryScratch,
     #[cfg(feature = "gpgpu")]
     pub(crate) gpu_boxes: frcd_gpgpu::BoxScratch,
+    /// GPU pair answers a pipelined run read before the frame (`crate::pipeline`).
+    #[cfg(feature = "gpgpu")]
+    pub(crate) gpu_answers: Option<crate::pipeline::GpuAnswers>,
     #[cfg(feature = "image")]
     pub(crate) image: frcd_image::ImageScratch,
 }

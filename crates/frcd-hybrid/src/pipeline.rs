@@ -1,0 +1,290 @@
+//! Pipelined checking: the GPU traverses frame k+1 while the CPU finishes frame k.
+//!
+//! [`Checker::check_pipelined`] takes frame k+1's poses and returns frame k's answer (one frame
+//! of latency). Per call: frame k+1's overlapping body pairs are found on a look-ahead CPU broad
+//! phase and its GPU body pairs are **submitted** (one batch, one submission); then frame k's
+//! batch, submitted one call earlier, is read back and its touching pairs re-decided exactly on
+//! the CPU, and frame k runs through [`Checker::check`] with those answers (CPU pairs, solid
+//! mode, segments, clearance) while the GPU works on frame k+1. The answers equal
+//! [`Checker::check`]'s frame for frame: the same stages run on the same poses; the GPU pairs
+//! are only computed earlier.
+
+use crate::{Checker, FrameResult, FrameState, HybridError};
+use frcd_geom::Pose;
+#[cfg(feature = "gpgpu")]
+use std::collections::{HashMap, HashSet};
+
+/// GPU pair answers read before their frame runs: used by the frame's pair stage
+/// (`Checker::gpu_pair_queries`) when its poses are these.
+#[cfg(feature = "gpgpu")]
+#[derive(Debug)]
+pub(crate) struct GpuAnswers {
+    pub(crate) poses: Vec<Pose>,
+    pub(crate) pairs: HashMap<(u32, u32), Vec<(u32, u32)>>,
+}
+
+/// A submitted frame's poses and overlapping body pairs.
+#[cfg(feature = "gpgpu")]
+type PrevFrame = (Vec<Pose>, HashSet<(u32, u32)>);
+
+/// A frame's GPU batch, submitted and not yet read.
+#[cfg(feature = "gpgpu")]
+#[derive(Debug)]
+struct InFlight {
+    poses: Vec<Pose>,
+    keys: Vec<(u32, u32)>,
+    batch: frcd_gpgpu::SubmittedBatch,
+}
+
+/// Caller-owned state of pipelined checking ([`Checker::check_pipelined`]): the frame state,
+/// a look-ahead broad phase, the frame held back (its poses) and its GPU batch in flight. One
+/// per checker; a pipeline used with one checker is refused by another
+/// ([`HybridError::ForeignState`]) until [`Pipeline::reset`].
+///
+/// ```no_run
+/// use frcd_hybrid::{BodySpec, Checker, Options, Pipeline};
+/// # fn poses(_: usize) -> Vec<frcd_geom::Pose> { vec![] }
+/// # let bodies: Vec<BodySpec> = vec![];
+/// let checker = Checker::new(bodies, &[], Options::default())?;
+/// let mut pipe = Pipeline::new();
+/// for k in 0..100 {
+///     // Frame k goes in; frame k-1's answer comes out (none for the first frame).
+///     if let Some(frame) = checker.check_pipelined(&poses(k), &mut pipe)? {
+///         println!("{} contacts", frame.contacts.len());
+///     }
+/// }
+/// let last = checker.flush_pipelined(&mut pipe)?; // frame 99
+/// # Ok::<(), frcd_hybrid::HybridError>(())
+/// ```
+#[derive(Debug, Default)]
+pub struct Pipeline {
+    state: FrameState,
+    /// Owner of the pipeline (a checker's serial; 0: none yet).
+    owner: u64,
+    /// The frame held back: its poses (checked at the next call).
+    held: Option<Vec<Pose>>,
+    /// Broad phase of the frame being submitted (the state's World is one frame behind).
+    #[cfg(feature = "gpgpu")]
+    ahead: FrameState,
+    #[cfg(feature = "gpgpu")]
+    in_flight: Option<InFlight>,
+    /// Scratch buffers of the batch not in flight.
+    #[cfg(feature = "gpgpu")]
+    spare: Option<frcd_gpgpu::QueryScratch>,
+    /// The previously submitted frame's poses and candidate pairs (whose answers the frame
+    /// state will hold, so a pair with unchanged poses is reused, not recomputed).
+    #[cfg(feature = "gpgpu")]
+    prev: Option<PrevFrame>,
+}
+
+impl Pipeline {
+    /// An empty pipeline.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// True while a frame is held back (its answer comes with the next call or
+    /// [`Checker::flush_pipelined`]).
+    pub fn is_holding(&self) -> bool {
+        self.held.is_some()
+    }
+
+    /// The frame state (coherence caches, broad phase) of the frames answered so far.
+    pub fn state(&self) -> &FrameState {
+        &self.state
+    }
+
+    /// Drops the held frame and its GPU work, forgets every cached answer and the checker the
+    /// pipeline belonged to.
+    pub fn reset(&mut self) {
+        *self = Self::default();
+    }
+}
+
+impl Checker {
+    /// Pipelined [`Checker::check`]: takes frame k+1's poses, returns frame k's answer (`None`
+    /// on the first call). Frame k+1's GPU pair batch is submitted before frame k is finished,
+    /// so the GPU traverses frame k+1 while the CPU re-decides frame k's GPU pairs exactly and
+    /// runs its CPU pairs. Answers equal [`Checker::check`]'s, frame for frame; call
+    /// [`Checker::flush_pipelined`] for the last frame. Without a GPU in use it is
+    /// [`Checker::check`] with one frame of latency.
+    ///
+    /// Bad poses are refused before anything is held (the held frame stays held). An error
+    /// while finishing frame k is returned for frame k; frame k+1 stays held.
+    pub fn check_pipelined(
+        &self,
+        poses: &[Pose],
+        pipe: &mut Pipeline,
+    ) -> Result<Option<FrameResult>, HybridError> {
+        self.check_poses(poses)?;
+        if pipe.owner != 0 && pipe.owner != self.serial {
+            return Err(HybridError::ForeignState);
+        }
+        pipe.owner = self.serial;
+        #[cfg(feature = "gpgpu")]
+        let next = self.submit_ahead(poses, pipe)?;
+        let held = pipe.held.replace(poses.to_vec());
+        #[cfg(feature = "gpgpu")]
+        let current = std::mem::replace(&mut pipe.in_flight, next);
+        let Some(held) = held else {
+            return Ok(None);
+        };
+        #[cfg(feature = "gpgpu")]
+        self.read_in_flight(current, pipe)?;
+        self.check(&held, &mut pipe.state).map(Some)
+    }
+
+    /// The answer of the frame [`Checker::check_pipelined`] holds back (`None` when none is).
+    pub fn flush_pipelined(&self, pipe: &mut Pipeline) -> Result<Option<FrameResult>, HybridError> {
+        if pipe.owner != 0 && pipe.owner != self.serial {
+            return Err(HybridError::ForeignState);
+        }
+        let Some(held) = pipe.held.take() else {
+            return Ok(None);
+        };
+        #[cfg(feature = "gpgpu")]
+        {
+            let current = pipe.in_flight.take();
+            self.read_in_flight(current, pipe)?;
+        }
+        self.check(&held, &mut pipe.state).map(Some)
+    }
+
+    /// The checks of [`Checker::check`] on poses, made before a frame is held.
+    fn check_poses(&self, poses: &[Pose]) -> Result<(), HybridError> {
+        if poses.len() != self.bodies.len() {
+            return Err(HybridError::PoseCount {
+                expected: self.bodies.len(),
+                got: poses.len(),
+            });
+        }
+        if let Some(i) = poses.iter().position(|p| !p.is_valid()) {
+            return Err(HybridError::InvalidPose {
+                body: self.bodies[i].name.clone(),
+                pose: poses[i],
+            });
+        }
+        Ok(())
+    }
+
+    /// Frame `poses`: its rough colliding set on the look-ahead broad phase, and its GPU pairs
+    /// (those [`Checker::check`] will send to the GPU: overlapping, not reused, chosen by the
+    /// cost model) submitted as one batch. `None` when no GPU pair stage runs.
+    #[cfg(feature = "gpgpu")]
+    fn submit_ahead(
+        &self,
+        poses: &[Pose],
+        pipe: &mut Pipeline,
+    ) -> Result<Option<InFlight>, HybridError> {
+        let Some(g) = self
+            .gpgpu
+            .as_ref()
+            .filter(|_| self.options.mode == crate::Mode::Exact)
+        else {
+            return Ok(None);
+        };
+        if pipe.ahead.world.is_none() || pipe.ahead.owner != self.serial {
+            self.bind(&mut pipe.ahead, poses)?;
+        }
+        // The look-ahead broad phase runs on the CPU World whatever the backend: the box pass
+        // on the GPU would be one more blocking readback per frame. Only pairs whose raw boxes
+        // overlap can go to the GPU pair stage; they are the World's pairs at margin 0
+        // (exclusions and static pairs already filtered).
+        let world = pipe.ahead.world.as_mut().expect("bound above");
+        pipe.ahead.updates.clear();
+        pipe.ahead
+            .updates
+            .extend(pipe.ahead.ids.iter().copied().zip(poses.iter().copied()));
+        world.set_poses(&pipe.ahead.updates)?;
+        let mut overlapping: Vec<(u32, u32)> = world
+            .overlapping_pairs(0.0)
+            .into_iter()
+            .filter(|&(a, b)| match (world.body_aabb(a), world.body_aabb(b)) {
+                (Some(ba), Some(bb)) => ba.intersects(&bb),
+                _ => false,
+            })
+            .map(|(a, b)| (a.index().min(b.index()), a.index().max(b.index())))
+            .collect();
+        overlapping.sort_unstable();
+        // Check reuses a pair's last answer when the pair was a candidate of the previous frame
+        // and both poses are unchanged (then its boxes overlapped then too: only overlapping
+        // pairs need remembering).
+        let reused = |key: (u32, u32)| {
+            pipe.prev.as_ref().is_some_and(|(p, keys)| {
+                keys.contains(&key)
+                    && p[key.0 as usize] == poses[key.0 as usize]
+                    && p[key.1 as usize] == poses[key.1 as usize]
+            })
+        };
+        let keys: Vec<(u32, u32)> = overlapping
+            .iter()
+            .copied()
+            .filter(|&k| !reused(k) && self.wants_gpu_narrow(k))
+            .collect();
+        pipe.prev = Some((poses.to_vec(), overlapping.into_iter().collect()));
+        if keys.is_empty() {
+            return Ok(None);
+        }
+        let items: Vec<frcd_gpgpu::BodyPair<'_>> = keys
+            .iter()
+            .map(|&(a, b)| {
+                let (ia, ib) = (a as usize, b as usize);
+                let (ma, mb) = (self.bodies[ia].mesh, self.bodies[ib].mesh);
+                (&g.meshes[ma], &poses[ia], &g.meshes[mb], &poses[ib])
+            })
+            .collect();
+        let scratch = pipe.spare.take().unwrap_or_default();
+        match g.ctx.submit_batch(&items, scratch) {
+            Ok(batch) => Ok(Some(InFlight {
+                poses: poses.to_vec(),
+                keys,
+                batch,
+            })),
+            Err(e) => self.gpu_ahead_failed(e),
+        }
+    }
+
+    /// Reads frame k's batch (waiting on its submission only; the GPU may be busy with frame
+    /// k+1) and leaves its answers for [`Checker::check`]'s pair stage.
+    #[cfg(feature = "gpgpu")]
+    fn read_in_flight(
+        &self,
+        current: Option<InFlight>,
+        pipe: &mut Pipeline,
+    ) -> Result<(), HybridError> {
+        pipe.state.gpu_answers = None;
+        let (Some(f), Some(g)) = (current, self.gpgpu.as_ref()) else {
+            return Ok(());
+        };
+        match g.ctx.resolve_batch(f.batch) {
+            Ok((batch, scratch)) => {
+                pipe.spare = Some(scratch);
+                pipe.state.gpu_answers = Some(crate::pipeline::GpuAnswers {
+                    poses: f.poses,
+                    pairs: f
+                        .keys
+                        .into_iter()
+                        .zip(batch.results.into_iter().map(|r| r.pairs))
+                        .collect(),
+                });
+                Ok(())
+            }
+            Err(e) => self.gpu_ahead_failed(e).map(|_| ()),
+        }
+    }
+
+    /// A GPU failure ahead of the frame: an error under [`crate::GpuPolicy::Require`];
+    /// otherwise the frame's own pair stage runs as in [`Checker::check`] (and reports its
+    /// fallback there).
+    #[cfg(feature = "gpgpu")]
+    fn gpu_ahead_failed(&self, e: frcd_gpgpu::GpuError) -> Result<Option<InFlight>, HybridError> {
+        if self.options.gpu == crate::GpuPolicy::Require {
+            return Err(HybridError::Gpu {
+                stage: "pair query",
+                source: e.into(),
+            });
+        }
+        log::warn!("GPU pair batch ahead of its frame failed: {e}");
+        Ok(None)
+    }
+}

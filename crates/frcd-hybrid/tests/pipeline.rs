@@ -1,0 +1,191 @@
+//! Pipelined checking (`Checker::check_pipelined`) against `Checker::check`, frame for frame, on
+//! a multi-frame many-body scene: identical answers, one GPU submission per frame, frame k+1
+//! submitted before frame k is read. GPU runs SKIP without an adapter unless FRCD_REQUIRE_GPU=1.
+
+use frcd_geom::{DQuat, DVec3, Pose, shapes};
+use frcd_hybrid::{
+    Backend, BodySpec, Checker, FrameResult, FrameState, GpuPolicy, HybridError, Options, Pipeline,
+};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use std::sync::Arc;
+
+fn gpu_required() -> bool {
+    std::env::var("FRCD_REQUIRE_GPU").is_ok_and(|v| v == "1")
+}
+
+/// 24 bodies of three kinds moving through each other for 10 frames; frames 4 and 5 repeat
+/// frame 3's poses (answers reused), body 0 is static, one pair is excluded.
+/// Bodies, excluded pairs, poses per frame.
+type Scene = (Vec<BodySpec>, Vec<(usize, usize)>, Vec<Vec<Pose>>);
+
+fn scene() -> Scene {
+    let mut rng = StdRng::seed_from_u64(42);
+    let meshes = [
+        Arc::new(shapes::icosphere(1.0, 2)),
+        Arc::new(shapes::cuboid(DVec3::new(0.7, 0.5, 0.4))),
+        Arc::new(shapes::torus(0.8, 0.25, 16, 8).expect("torus")),
+    ];
+    let n = 24;
+    let bodies: Vec<BodySpec> = (0..n)
+        .map(|i| BodySpec {
+            name: format!("body{i}"),
+            mesh: meshes[i % 3].clone(),
+            is_static: i == 0,
+        })
+        .collect();
+    let side = 4.5;
+    let start: Vec<DVec3> = (0..n)
+        .map(|_| DVec3::new(rng.random(), rng.random(), rng.random()) * side)
+        .collect();
+    let vel: Vec<DVec3> = (0..n)
+        .map(|i| {
+            if i == 0 {
+                DVec3::ZERO
+            } else {
+                DVec3::new(
+                    rng.random::<f64>() - 0.5,
+                    rng.random::<f64>() - 0.5,
+                    rng.random::<f64>() - 0.5,
+                ) * 0.6
+            }
+        })
+        .collect();
+    let frames = (0..10)
+        .map(|f| {
+            let t = match f {
+                4 | 5 => 3.0,
+                _ => f as f64,
+            };
+            (0..n)
+                .map(|i| {
+                    Pose::new(
+                        start[i] + vel[i] * t,
+                        DQuat::from_rotation_z(0.2 * t * (i % 5) as f64),
+                    )
+                })
+                .collect()
+        })
+        .collect();
+    (bodies, vec![(1, 2)], frames)
+}
+
+/// Everything of a frame's answer but timings.
+fn answer(r: &FrameResult) -> impl PartialEq + std::fmt::Debug {
+    (
+        r.contacts.clone(),
+        r.clearances.clone(),
+        r.rcs,
+        r.reused,
+        r.stages.map(|s| (s.stage, s.backend, s.items)),
+        r.notes.clone(),
+    )
+}
+
+/// Runs the scene with `check` and with `check_pipelined` on two checkers of `options`;
+/// returns the two checkers (for their counters) and the number of frames with contacts.
+fn compare(options: Options) -> Result<(Checker, Checker, usize), HybridError> {
+    let (bodies, exclude, frames) = scene();
+    let plain = Checker::new(bodies.clone(), &exclude, options.clone())?;
+    let piped = Checker::new(bodies, &exclude, options)?;
+    let mut state = FrameState::default();
+    let want: Vec<FrameResult> = frames
+        .iter()
+        .map(|p| plain.check(p, &mut state))
+        .collect::<Result<_, _>>()?;
+    let mut pipe = Pipeline::new();
+    let mut got = Vec::new();
+    for (k, poses) in frames.iter().enumerate() {
+        let out = piped.check_pipelined(poses, &mut pipe)?;
+        assert_eq!(out.is_none(), k == 0, "one frame of latency");
+        assert!(pipe.is_holding());
+        got.extend(out);
+    }
+    got.extend(piped.flush_pipelined(&mut pipe)?);
+    assert!(!pipe.is_holding());
+    assert!(piped.flush_pipelined(&mut pipe)?.is_none());
+    assert_eq!(got.len(), want.len());
+    for (k, (w, g)) in want.iter().zip(&got).enumerate() {
+        assert_eq!(answer(w), answer(g), "frame {k}");
+    }
+    let touching = want.iter().filter(|r| !r.contacts.is_empty()).count();
+    assert!(
+        want.iter().any(|r| r.reused > 0),
+        "the repeated frames reuse"
+    );
+    Ok((plain, piped, touching))
+}
+
+#[test]
+fn pipelined_equals_plain_on_the_cpu() {
+    let options = Options {
+        gpu: GpuPolicy::Off,
+        clearance: Some(0.2),
+        ..Options::default()
+    };
+    let (_, piped, touching) = compare(options).unwrap();
+    assert!(touching >= 5, "{touching}");
+    assert_eq!(piped.gpu_submissions(), 0);
+}
+
+#[test]
+fn pipelined_equals_plain_on_the_gpu() {
+    let options = Options {
+        backend: Backend::Gpgpu,
+        gpu: GpuPolicy::Require,
+        clearance: Some(0.2),
+        ..Options::default()
+    };
+    let (plain, piped, touching) = match compare(options) {
+        Err(HybridError::FeatureDisabled { .. }) => {
+            println!("SKIP pipelined GPU: built without the 'gpgpu' feature");
+            return;
+        }
+        Err(HybridError::Gpu { source, .. }) if !gpu_required() => {
+            println!("SKIP pipelined GPU: no GPU adapter ({source})");
+            return;
+        }
+        other => other.expect("gpgpu backend"),
+    };
+    assert!(plain.has_gpgpu() && piped.has_gpgpu());
+    assert!(touching >= 5, "{touching}");
+    // The same submissions in both modes: per frame the box pass (Backend::Gpgpu) and one pair
+    // batch, the pipelined one submitted ahead of its frame and none re-submitted (the
+    // look-ahead broad phase runs on the CPU).
+    let frames = scene().2.len() as u64;
+    assert!(
+        plain.gpu_submissions() >= frames,
+        "{}",
+        plain.gpu_submissions()
+    );
+    assert_eq!(piped.gpu_submissions(), plain.gpu_submissions());
+}
+
+#[test]
+fn a_pipeline_of_another_checker_and_bad_poses_are_refused() {
+    let (bodies, exclude, frames) = scene();
+    let a = Checker::new(bodies.clone(), &exclude, Options::default()).unwrap();
+    let b = Checker::new(bodies, &exclude, Options::default()).unwrap();
+    let mut pipe = Pipeline::new();
+    assert!(a.check_pipelined(&frames[0], &mut pipe).unwrap().is_none());
+    assert!(matches!(
+        b.check_pipelined(&frames[1], &mut pipe),
+        Err(HybridError::ForeignState)
+    ));
+    assert!(matches!(
+        a.check_pipelined(&frames[1][1..], &mut pipe),
+        Err(HybridError::PoseCount { .. })
+    ));
+    let mut bad = frames[1].clone();
+    bad[3].translation.x = f64::NAN;
+    assert!(matches!(
+        a.check_pipelined(&bad, &mut pipe),
+        Err(HybridError::InvalidPose { .. })
+    ));
+    // The held frame survived the refusals.
+    let r = a.flush_pipelined(&mut pipe).unwrap().expect("frame 0 held");
+    let want = a.check(&frames[0], &mut FrameState::default()).unwrap();
+    assert_eq!(r.contacts, want.contacts);
+    pipe.reset();
+    assert!(b.check_pipelined(&frames[0], &mut pipe).unwrap().is_none());
+}
