@@ -13,7 +13,7 @@
 use anyhow::{Result, bail};
 use frcd_benches::scenes;
 use frcd_geom::{Pose, TriMesh};
-use frcd_hybrid::{Backend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, Mode, Options};
+use frcd_hybrid::{Backend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, Accuracy, Options};
 use frcd_obb::oracle;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -198,12 +198,12 @@ pub fn run(mut o: Opts) -> Result<()> {
         scenes::wheelset_on_rails(o.frames.min(100)),
         o.frames,
     ));
-    let rows_spec: [(Backend, Mode); 5] = [
-        (Backend::Cpu, Mode::Exact),
-        (Backend::Hybrid, Mode::Exact),
-        (Backend::Gpgpu, Mode::Exact),
-        (Backend::Hybrid, Mode::Fast),
-        (Backend::Image, Mode::Fast),
+    let rows_spec: [(Backend, Accuracy); 5] = [
+        (Backend::Cpu, Accuracy::Exact),
+        (Backend::Hybrid, Accuracy::Exact),
+        (Backend::Gpgpu, Accuracy::Exact),
+        (Backend::Hybrid, Accuracy::Fast),
+        (Backend::Image, Accuracy::Fast),
     ];
     let mut rows = Vec::new();
     let mut adapter = String::from("none");
@@ -301,7 +301,7 @@ pub fn run(mut o: Opts) -> Result<()> {
                 100.0 * row.missed_tri_fraction,
                 row.stages
             );
-            if mode == Mode::Exact && (row.missed_bodies > 0 || row.missed_tri_fraction > 0.0) {
+            if mode == Accuracy::Exact && (row.missed_bodies > 0 || row.missed_tri_fraction > 0.0) {
                 bail!("{}: exact row {} lost pairs", s.name, row.backend);
             }
             rows.push(row);

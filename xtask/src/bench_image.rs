@@ -18,7 +18,7 @@
 
 use anyhow::{Result, bail};
 use frcd_geom::{DQuat, DVec2, DVec3, Pose, TriMesh, shapes};
-use frcd_image::{GpuMesh, ImageDetector, ImageOptions, ImageScratch};
+use frcd_image::{ImageMesh, ImageDetector, ImageOptions, ImageScratch};
 use std::f64::consts::PI;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -85,8 +85,8 @@ impl Bench<'_> {
     /// Median query time (ms) and the last result.
     fn time(
         &mut self,
-        a: &GpuMesh,
-        b: &GpuMesh,
+        a: &ImageMesh,
+        b: &ImageMesh,
         pose_b: &Pose,
         res: u32,
     ) -> Result<(f64, frcd_image::ImageResult)> {
@@ -112,8 +112,8 @@ impl Bench<'_> {
     /// Worst over `OFFSETS` lateral shifts `(o, −o, 0)` of B.
     fn largest_missed(
         &mut self,
-        a: &GpuMesh,
-        b: &GpuMesh,
+        a: &ImageMesh,
+        b: &ImageMesh,
         pose_at: &dyn Fn(f64) -> Pose,
         res: u32,
     ) -> Result<Option<f64>> {

@@ -13,10 +13,10 @@
 //! Axes: x along the track, y to the left, z up; top of rail at z = 0.
 
 use anyhow::{Context, Result, ensure};
-use frcd_geom::shapes::{self, CoilSpringParams, Frame, WheelsetParams};
+use frcd_geom::shapes::{self, CoilSpringParams, SweepFrame, WheelsetParams};
 use frcd_geom::{DQuat, DVec2, DVec3, Pose, TriMesh};
 use frcd_io::{
-    BodySpec, FrameReport, Interference, PoseSpec, Report, Scene, SceneFile, Trajectory,
+    SceneBody, FrameReport, Interference, PoseSpec, Report, Scene, SceneFile, Trajectory,
     TrajectoryRow, write_obj, write_stl_binary,
 };
 use frcd_obb::{BuildOptions, Mode, ObbTree, Request};
@@ -179,7 +179,7 @@ fn micro(mesh: TriMesh) -> Result<TriMesh> {
 
 /// A polygon in the (x, z) plane extruded along y over [-half, half].
 fn extrude_y(poly_xz: &[DVec2], half: f64) -> Result<TriMesh> {
-    let frames = [-half, half].map(|y| Frame {
+    let frames = [-half, half].map(|y| SweepFrame {
         origin: DVec3::new(0.0, y, 0.0),
         u: DVec3::X,
         v: DVec3::Z,
@@ -189,7 +189,7 @@ fn extrude_y(poly_xz: &[DVec2], half: f64) -> Result<TriMesh> {
 
 /// A polygon in the (y, z) plane extruded along x over [-half, half].
 fn extrude_x(poly_yz: &[DVec2], half: f64) -> Result<TriMesh> {
-    let frames = [-half, half].map(|x| Frame {
+    let frames = [-half, half].map(|x| SweepFrame {
         origin: DVec3::new(x, 0.0, 0.0),
         u: DVec3::Y,
         v: DVec3::Z,
@@ -277,10 +277,10 @@ fn brake_block(w: &WheelsetParams) -> Result<TriMesh> {
     ];
     let span = 36f64.to_radians();
     let n = 12;
-    let frames: Vec<Frame> = (0..=n)
+    let frames: Vec<SweepFrame> = (0..=n)
         .map(|k| {
             let phi = PI - span / 2.0 + span * k as f64 / n as f64;
-            Frame {
+            SweepFrame {
                 origin: DVec3::ZERO,
                 u: DVec3::new(phi.cos(), 0.0, phi.sin()),
                 v: DVec3::Y,
@@ -362,12 +362,12 @@ fn track() -> Result<TriMesh> {
     stations.push(TRACK_TO);
     let profile = shapes::rail_profile();
     let rail = |side: f64| -> Result<TriMesh> {
-        let frames: Vec<Frame> = stations
+        let frames: Vec<SweepFrame> = stations
             .iter()
             .map(|&s| {
                 let n = normal(s);
                 let p = centreline(s) + side * RAIL_OFFSET * n;
-                Frame {
+                SweepFrame {
                     origin: DVec3::new(p.x, p.y, -0.172),
                     u: DVec3::new(n.x, n.y, 0.0),
                     v: DVec3::Z,
@@ -827,7 +827,7 @@ pub fn run(o: Opts) -> Result<()> {
         bodies: list
             .iter()
             .zip(&initial)
-            .map(|((name, file, st), p)| BodySpec {
+            .map(|((name, file, st), p)| SceneBody {
                 name: name.clone(),
                 mesh: (*file).to_owned(),
                 is_static: *st,

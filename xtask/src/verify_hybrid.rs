@@ -20,7 +20,7 @@ use anyhow::Result;
 use frcd_benches::scenes::Scene;
 use frcd_geom::{Pose, TriMesh};
 use frcd_hybrid::{
-    Backend as HBackend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, Mode, Options,
+    Backend as HBackend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, Accuracy, Options,
 };
 use frcd_image::reference::reference_image;
 use frcd_image::{ImageDetector, ImageOptions, ImageScratch};
@@ -286,7 +286,7 @@ pub fn backends() -> Vec<Box<dyn Backend>> {
     out.push(Box::new(HybridRow {
         label: "hybrid fast r128",
         options: Options {
-            mode: Mode::Fast,
+            mode: Accuracy::Fast,
             backend: HBackend::Image,
             gpu: GpuPolicy::Require,
             image_resolution: FAST_RESOLUTION,

@@ -20,7 +20,7 @@ use anyhow::Result;
 use frcd_benches::scenes::Scene;
 use frcd_geom::{Pose, Sphere, TriMesh};
 use frcd_image::reference::{agreement, reference_image};
-use frcd_image::{GpuMesh, ImageDetector, ImageError, ImageOptions, ImageScratch};
+use frcd_image::{ImageMesh, ImageDetector, ImageError, ImageOptions, ImageScratch};
 use std::collections::HashMap;
 use std::sync::Arc;
 
@@ -93,7 +93,7 @@ impl Backend for ImageBackend {
     fn answer(&mut self, scene: &Scene) -> Result<Answers> {
         self.notes.clear();
         self.refused = None;
-        let mut uploaded: HashMap<*const TriMesh, Arc<GpuMesh>> = HashMap::new();
+        let mut uploaded: HashMap<*const TriMesh, Arc<ImageMesh>> = HashMap::new();
         let mut meshes = Vec::with_capacity(scene.bodies.len());
         for b in &scene.bodies {
             let key = Arc::as_ptr(&b.mesh);

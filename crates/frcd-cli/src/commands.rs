@@ -4,7 +4,7 @@ use crate::{BackendArg, CheckerArgs, ModeArg};
 use anyhow::{Context, Result, bail};
 use frcd_geom::Pose;
 use frcd_hybrid::{
-    Backend, BodySpec, Checker, Contact, CostModel, FrameResult, FrameState, Mode, Options,
+    Backend, BodySpec, Checker, Contact, CostModel, FrameResult, FrameState, Accuracy, Options,
     StageBackend,
 };
 use frcd_io::{FrameReport, Interference, Report, Scene};
@@ -219,10 +219,10 @@ fn backend_of(b: BackendArg) -> Backend {
     }
 }
 
-fn mode_of(m: ModeArg) -> Mode {
+fn mode_of(m: ModeArg) -> Accuracy {
     match m {
-        ModeArg::Exact => Mode::Exact,
-        ModeArg::Fast => Mode::Fast,
+        ModeArg::Exact => Accuracy::Exact,
+        ModeArg::Fast => Accuracy::Fast,
     }
 }
 
@@ -746,11 +746,11 @@ pub fn bench(
         frames
     );
     let rows = [
-        (Backend::Cpu, Mode::Exact),
-        (Backend::Hybrid, Mode::Exact),
-        (Backend::Gpgpu, Mode::Exact),
-        (Backend::Hybrid, Mode::Fast),
-        (Backend::Image, Mode::Fast),
+        (Backend::Cpu, Accuracy::Exact),
+        (Backend::Hybrid, Accuracy::Exact),
+        (Backend::Gpgpu, Accuracy::Exact),
+        (Backend::Hybrid, Accuracy::Fast),
+        (Backend::Image, Accuracy::Fast),
     ];
     let mut truth: Option<Vec<Vec<(usize, usize, usize)>>> = None;
     let mut out = Vec::new();

@@ -310,7 +310,7 @@ pub fn revolve(profile: &[DVec2], segments: u32) -> Result<TriMesh, ShapeError> 
 /// `origin + x·u + y·v`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
-pub struct Frame {
+pub struct SweepFrame {
     /// Where the profile's origin goes.
     pub origin: DVec3,
     /// Image of the profile's x axis.
@@ -369,7 +369,7 @@ fn triangulate_polygon(poly: &[DVec2]) -> Option<Vec<[u32; 3]>> {
 /// orientation to come out outward directly; otherwise the whole mesh is flipped, which is also
 /// correct. The swept tube must not self-intersect (not checked).
 /// `2 · |profile| · (rings − 1 or rings)` side triangles, plus `2 (|profile| − 2)` in caps.
-pub fn sweep(profile: &[DVec2], frames: &[Frame], closed: bool) -> Result<TriMesh, ShapeError> {
+pub fn sweep(profile: &[DVec2], frames: &[SweepFrame], closed: bool) -> Result<TriMesh, ShapeError> {
     const S: &str = "sweep";
     check(profile.len() >= 3, S, "profile", "needs at least 3 points")?;
     finite_profile(profile, S)?;
@@ -660,11 +660,11 @@ pub fn torus_knot(params: &TorusKnotParams) -> Result<TriMesh, ShapeError> {
         "tubular_segments",
         "must be >= 3",
     )?;
-    let frames: Vec<Frame> = (0..k.tubular_segments)
+    let frames: Vec<SweepFrame> = (0..k.tubular_segments)
         .map(|i| {
             let t = TAU * i as f64 / k.tubular_segments as f64;
             let (origin, tangent, normal) = k.centreline(t);
-            Frame {
+            SweepFrame {
                 origin,
                 u: normal,
                 v: tangent.cross(normal),
@@ -746,13 +746,13 @@ pub fn coil_spring(params: &CoilSpringParams) -> Result<TriMesh, ShapeError> {
     let steps = (c.turns * c.segments_per_turn as f64).ceil().max(1.0) as usize;
     check(steps < 1 << 24, S, "turns", "too many rings")?;
     let t_end = TAU * c.turns;
-    let frames: Vec<Frame> = (0..=steps)
+    let frames: Vec<SweepFrame> = (0..=steps)
         .map(|i| {
             let t = t_end * i as f64 / steps as f64;
             let (s, co) = t.sin_cos();
             let radial = DVec3::new(co, s, 0.0);
             let tangent = DVec3::new(-c.coil_radius * s, c.coil_radius * co, rise).normalize();
-            Frame {
+            SweepFrame {
                 origin: DVec3::new(c.coil_radius * co, c.coil_radius * s, rise * t),
                 u: radial,
                 v: tangent.cross(radial),
@@ -1326,11 +1326,11 @@ pub fn rail(params: &RailParams) -> Result<TriMesh, ShapeError> {
         "must be in 1..2^24",
     )?;
     let n = params.segments as usize;
-    let frames: Vec<Frame> = match params.path {
+    let frames: Vec<SweepFrame> = match params.path {
         RailPath::Straight { length } => {
             positive(length, S, "length")?;
             (0..=n)
-                .map(|i| Frame {
+                .map(|i| SweepFrame {
                     origin: DVec3::new(length * i as f64 / n as f64, 0.0, 0.0),
                     u: DVec3::Y,
                     v: DVec3::Z,
@@ -1354,7 +1354,7 @@ pub fn rail(params: &RailParams) -> Result<TriMesh, ShapeError> {
             (0..=n)
                 .map(|i| {
                     let (s, c) = (angle * i as f64 / n as f64).sin_cos();
-                    Frame {
+                    SweepFrame {
                         origin: DVec3::new(radius * s, radius * (1.0 - c), 0.0),
                         u: DVec3::new(-s, c, 0.0),
                         v: DVec3::Z,
@@ -1742,7 +1742,7 @@ mod tests {
         assert!(revolve(&p(&[(1.0, 0.0), (1.0, 0.0), (2.0, 1.0)]), 8).is_err()); // repeated
         assert!(revolve(&p(&[(1.0, 0.0), (2.0, f64::NAN), (2.0, 1.0)]), 8).is_err());
         let sq = p(&[(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]);
-        let fr = |x: f64| Frame {
+        let fr = |x: f64| SweepFrame {
             origin: DVec3::new(x, 0.0, 0.0),
             u: DVec3::Y,
             v: DVec3::Z,
@@ -1752,12 +1752,12 @@ mod tests {
         assert_shape(&m, 1, 0);
         assert!((m.signed_volume() - 2.0).abs() < 1e-12);
         let flipped = [
-            Frame {
+            SweepFrame {
                 u: DVec3::Z,
                 v: DVec3::Y,
                 ..fr(0.0)
             },
-            Frame {
+            SweepFrame {
                 u: DVec3::Z,
                 v: DVec3::Y,
                 ..fr(2.0)

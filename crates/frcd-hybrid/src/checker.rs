@@ -7,7 +7,7 @@ use crate::gpu::Gpgpu;
 #[cfg(feature = "image")]
 use crate::gpu::Image;
 use crate::report::{PairClearance, PairContact, Stage, StageBackend, StageReport, Via};
-use crate::{Backend, BodySpec, FrameResult, FrameState, HybridError, Mode, Options};
+use crate::{Backend, BodySpec, FrameResult, FrameState, HybridError, Accuracy, Options};
 use frcd_geom::{Pose, TriMesh};
 use frcd_obb::{ObbTree, World, WorldOptions};
 use rayon::prelude::*;
@@ -91,7 +91,7 @@ impl Checker {
                     feature: "image",
                 });
             }
-            Backend::Image if options.mode == Mode::Exact => {
+            Backend::Image if options.mode == Accuracy::Exact => {
                 return Err(HybridError::ImageNeedsFast);
             }
             _ => {}
@@ -299,7 +299,7 @@ impl Checker {
         drop(old);
         // Stage 2: accurate colliding set (fast mode).
         #[cfg(feature = "image")]
-        if self.options.mode == Mode::Fast {
+        if self.options.mode == Accuracy::Fast {
             self.accurate_colliding_set(&mut work, poses, state, &mut result)?;
         }
         // Stage 3: exact triangle tests.

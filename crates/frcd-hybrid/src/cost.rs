@@ -56,6 +56,7 @@ impl Default for CostModel {
 
 /// A cost model could not be read or written.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum CostModelError {
     /// The file could not be read or written.
     #[error("cost model file {path}: {source}")]

@@ -5,7 +5,7 @@
 
 #[cfg(feature = "gpgpu")]
 use crate::exact::{Job, Plan};
-use crate::{Backend, Checker, FrameResult, GpuFailure, GpuPolicy, HybridError, Mode};
+use crate::{Backend, Checker, FrameResult, GpuFailure, GpuPolicy, HybridError, Accuracy};
 #[cfg(feature = "gpgpu")]
 use crate::{FrameState, report::Via};
 #[allow(unused_imports)]
@@ -23,7 +23,7 @@ pub(crate) struct Gpgpu {
 pub(crate) struct Image {
     pub(crate) det: frcd_image::ImageDetector,
     /// Per mesh: `None` for a mesh that is not a closed oriented manifold.
-    pub(crate) meshes: Vec<Option<frcd_image::GpuMesh>>,
+    pub(crate) meshes: Vec<Option<frcd_image::ImageMesh>>,
 }
 
 impl Checker {
@@ -75,14 +75,14 @@ impl Checker {
             Backend::Gpgpu => true,
             Backend::Hybrid => {
                 o.cost.gpu_broad_min_bodies().is_some_and(|m| n >= m)
-                    || (o.mode == Mode::Exact
+                    || (o.mode == Accuracy::Exact
                         && o.cost
                             .gpu_narrow_min_triangles()
                             .is_some_and(|t| self.max_pair_triangles() >= t))
             }
             _ => false,
         };
-        let want_image = o.mode == Mode::Fast
+        let want_image = o.mode == Accuracy::Fast
             && match o.backend {
                 Backend::Image => true,
                 Backend::Hybrid => o.cost.image_us.is_some(),
@@ -198,7 +198,7 @@ impl Checker {
     #[cfg(feature = "gpgpu")]
     pub(crate) fn wants_gpu_narrow(&self, key: (u32, u32)) -> bool {
         let o = &self.options;
-        if self.gpgpu.is_none() || o.mode != Mode::Exact {
+        if self.gpgpu.is_none() || o.mode != Accuracy::Exact {
             return false;
         }
         let (ma, mb) = (
@@ -226,7 +226,7 @@ impl Checker {
         let Some(g) = self
             .gpgpu
             .as_ref()
-            .filter(|_| self.options.mode == Mode::Exact)
+            .filter(|_| self.options.mode == Accuracy::Exact)
         else {
             return Ok(0);
         };

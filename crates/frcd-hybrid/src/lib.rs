@@ -10,13 +10,13 @@
 //!    the all-pairs GPU box pass of `frcd-gpgpu` (feature `gpgpu`) from
 //!    [`CostModel::gpu_broad_min_bodies`] bodies on. Both equal the f64 box test. With a
 //!    clearance threshold the boxes are grown by it.
-//! 2. **Accurate colliding set (ACS)**, [`Mode::Fast`] only: the image-space pass of
+//! 2. **Accurate colliding set (ACS)**, [`Accuracy::Fast`] only: the image-space pass of
 //!    `frcd-image` (feature `image`) on each RCS pair of closed meshes gives the triangles that
 //!    cross interfering pixels; a pair without interfering pixel is dropped.
-//! 3. **Exact triangle tests**: [`Mode::Exact`]: every RCS pair gets the exact OBB-tree query,
+//! 3. **Exact triangle tests**: [`Accuracy::Exact`]: every RCS pair gets the exact OBB-tree query,
 //!    on the CPU (rayon over pairs, with a per-pair temporal-coherence cache) or on the GPU
 //!    (`frcd-gpgpu`'s whole traversal, exact re-decision of uncertain pairs) when
-//!    [`CostModel::prefer_gpu_narrow`] says so for the pair's triangle count. [`Mode::Fast`]: the
+//!    [`CostModel::prefer_gpu_narrow`] says so for the pair's triangle count. [`Accuracy::Fast`]: the
 //!    exact test on the ACS triangles only (CPU, rayon).
 //!
 //! Pairs whose two poses are bit-for-bit last frame's are answered from last frame.
@@ -47,13 +47,13 @@
 //!
 //! ## The two modes
 //!
-//! - [`Mode::Exact`] never loses a pair: the answer (interfering body pairs, every touching
+//! - [`Accuracy::Exact`] never loses a pair: the answer (interfering body pairs, every touching
 //!   triangle pair, solid-mode containment) equals [`frcd_obb::oracle::answer`] for every
 //!   non-excluded, not-both-static pair. The image stage is **not run** in this mode: ray parity
 //!   sampled at pixel centres can prove interference but never its absence (it misses
 //!   interference thinner than a pixel, and touching with zero volume), and every touching
 //!   triangle pair has to be listed anyway, so it could only add work.
-//! - [`Mode::Fast`] is the thesis's pipeline. Everything it reports is true (the ACS triangle
+//! - [`Accuracy::Fast`] is the thesis's pipeline. Everything it reports is true (the ACS triangle
 //!   pairs are decided by the exact test; a pair whose ACS yields no touching pair gets the full
 //!   exact query). Its error is one-sided and bounded by the image resolution: with `s` the
 //!   pixel size of the pair's view (the longer lateral side of the two boxes' overlap divided
@@ -110,7 +110,7 @@ pub use cost::{CostModel, CostModelError};
 pub use error::{GpuFailure, HybridError};
 pub use frcd_obb::Containment;
 pub use frcd_tritri::Contact;
-pub use options::{Backend, BodySpec, GpuPolicy, Mode, Options};
+pub use options::{Backend, BodySpec, GpuPolicy, Accuracy, Options};
 pub use pipeline::Pipeline;
 pub use report::{FrameResult, PairClearance, PairContact, Stage, StageBackend, StageReport, Via};
 pub use state::FrameState;

@@ -10,7 +10,7 @@ use std::sync::Arc;
     Clone, Copy, Debug, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
 )]
 #[serde(rename_all = "lowercase")]
-pub enum Mode {
+pub enum Accuracy {
     /// Equal to the exact oracle: never loses a pair (see the crate docs).
     #[default]
     Exact,
@@ -18,12 +18,12 @@ pub enum Mode {
     Fast,
 }
 
-impl Mode {
+impl Accuracy {
     /// `exact` or `fast`.
     pub fn name(self) -> &'static str {
         match self {
-            Mode::Exact => "exact",
-            Mode::Fast => "fast",
+            Accuracy::Exact => "exact",
+            Accuracy::Fast => "fast",
         }
     }
 }
@@ -41,7 +41,7 @@ pub enum Backend {
     Cpu,
     /// GPU box pass and GPU exact pair queries for every pair (feature `gpgpu`).
     Gpgpu,
-    /// Image-space ACS for every pair of closed meshes ([`Mode::Fast`] only; feature `image`).
+    /// Image-space ACS for every pair of closed meshes ([`Accuracy::Fast`] only; feature `image`).
     Image,
 }
 
@@ -74,7 +74,7 @@ pub enum GpuPolicy {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Options {
     /// Exact or fast.
-    pub mode: Mode,
+    pub mode: Accuracy,
     /// Which backends may be used.
     pub backend: Backend,
     /// GPU device creation.
@@ -108,7 +108,7 @@ pub struct Options {
 impl Default for Options {
     fn default() -> Self {
         Self {
-            mode: Mode::Exact,
+            mode: Accuracy::Exact,
             backend: Backend::Hybrid,
             gpu: GpuPolicy::Auto,
             solid: true,

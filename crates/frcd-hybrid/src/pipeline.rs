@@ -179,7 +179,7 @@ impl Checker {
         let Some(g) = self
             .gpgpu
             .as_ref()
-            .filter(|_| self.options.mode == crate::Mode::Exact)
+            .filter(|_| self.options.mode == crate::Accuracy::Exact)
         else {
             return Ok(None);
         };

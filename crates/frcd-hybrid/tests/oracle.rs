@@ -2,7 +2,7 @@
 
 use frcd_geom::{DQuat, DVec3, Pose, TriMesh, shapes};
 use frcd_hybrid::{
-    Backend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, HybridError, Mode, Options,
+    Backend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, HybridError, Accuracy, Options,
     Stage, StageBackend, Via,
 };
 use frcd_obb::oracle;
@@ -256,7 +256,7 @@ fn bad_input_is_a_typed_error() {
     ));
     let fast_image_exact = Options {
         backend: Backend::Image,
-        mode: Mode::Exact,
+        mode: Accuracy::Exact,
         ..Options::default()
     };
     let e = Checker::new(s.bodies.clone(), &[], fast_image_exact).unwrap_err();
@@ -350,7 +350,7 @@ fn exact_gpgpu_and_gpu_heavy_hybrid_equal_oracle() {
 fn fast_mode_reports_only_true_interference() {
     let s = scene(8, 16, 3, true);
     let options = Options {
-        mode: Mode::Fast,
+        mode: Accuracy::Fast,
         backend: Backend::Image,
         gpu: GpuPolicy::Require,
         ..Options::default()

@@ -2,18 +2,18 @@ use crate::ImageError;
 
 /// A wgpu device and queue the detector runs on, with what it was checked for.
 ///
-/// Engines that already own a device pass it in with [`GpuContext::from_device`]; tools and tests
-/// use [`GpuContext::headless`], which picks an adapter (a real GPU, or Mesa's software Vulkan
+/// Engines that already own a device pass it in with [`ImageContext::from_device`]; tools and tests
+/// use [`ImageContext::headless`], which picks an adapter (a real GPU, or Mesa's software Vulkan
 /// driver lavapipe on a machine without one) and requests a device with exactly the
-/// [`GpuContext::required_features`] and limits read from the adapter.
+/// [`ImageContext::required_features`] and limits read from the adapter.
 ///
 /// ```no_run
-/// let ctx = frcd_image::GpuContext::headless()?;
+/// let ctx = frcd_image::ImageContext::headless()?;
 /// println!("running on {}", ctx.adapter_name());
 /// # Ok::<(), frcd_image::ImageError>(())
 /// ```
 #[derive(Clone, Debug)]
-pub struct GpuContext {
+pub struct ImageContext {
     device: wgpu::Device,
     queue: wgpu::Queue,
     adapter: Option<wgpu::AdapterInfo>,
@@ -24,7 +24,7 @@ const MIN_TEXTURE_DIMENSION: u32 = 64;
 /// Storage buffers the resolve pass binds (lengths, mask, counters).
 const STORAGE_BUFFERS_PER_STAGE: u32 = 3;
 
-impl GpuContext {
+impl ImageContext {
     /// Features the detector needs: `DEPTH32FLOAT_STENCIL8`. Depth peeling compares a fragment's
     /// depth with the previous layer's stored depth, which is exact only with a float depth buffer
     /// (a 24-bit unorm one rounds and would peel a layer twice).
@@ -166,7 +166,7 @@ impl GpuContext {
         &self.queue
     }
 
-    /// The adapter description when this context created the device ([`GpuContext::headless`]).
+    /// The adapter description when this context created the device ([`ImageContext::headless`]).
     pub fn adapter_info(&self) -> Option<&wgpu::AdapterInfo> {
         self.adapter.as_ref()
     }

@@ -2,7 +2,7 @@
 
 use crate::acs;
 use crate::view::{View, ViewAxis};
-use crate::{GpuContext, ImageError, Which};
+use crate::{ImageContext, ImageError, Which};
 use frcd_geom::{Aabb, DVec3, Pose, TriMesh};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -56,7 +56,7 @@ impl Default for ImageOptions {
 /// consistently oriented. Keeps a shared copy of the f64 mesh for the colliding set and the CPU
 /// reference.
 #[derive(Debug)]
-pub struct GpuMesh {
+pub struct ImageMesh {
     detector: u64,
     name: String,
     vertices: wgpu::Buffer,
@@ -68,7 +68,7 @@ pub struct GpuMesh {
     mesh: Arc<TriMesh>,
 }
 
-impl GpuMesh {
+impl ImageMesh {
     /// The caller's label given at upload.
     pub fn name(&self) -> &str {
         &self.name
@@ -84,7 +84,7 @@ impl GpuMesh {
         self.center
     }
 
-    /// Largest distance of a vertex from [`GpuMesh::center`].
+    /// Largest distance of a vertex from [`ImageMesh::center`].
     pub fn radius(&self) -> f64 {
         self.radius
     }
@@ -223,7 +223,7 @@ struct Scratch {
 /// uploaded once with [`ImageDetector::upload`]; queries take `&self`.
 #[derive(Debug)]
 pub struct ImageDetector {
-    ctx: GpuContext,
+    ctx: ImageContext,
     id: u64,
     draw_bgl: wgpu::BindGroupLayout,
     prev_bgl: wgpu::BindGroupLayout,
@@ -241,7 +241,7 @@ use frcd_gpu::describe;
 
 impl ImageDetector {
     /// Builds the pipelines on `ctx`'s device.
-    pub fn new(ctx: GpuContext) -> Result<Self, ImageError> {
+    pub fn new(ctx: ImageContext) -> Result<Self, ImageError> {
         let device = ctx.device().clone();
         // Shader translation failures (e.g. GLSL, which cannot textureLoad a depth texture)
         // are Internal errors, the rest Validation: capture both as a typed error.
@@ -405,25 +405,25 @@ impl ImageDetector {
         })
     }
 
-    /// A detector on a headless device ([`GpuContext::headless`]).
+    /// A detector on a headless device ([`ImageContext::headless`]).
     pub fn headless() -> Result<Self, ImageError> {
-        Self::new(GpuContext::headless()?)
+        Self::new(ImageContext::headless()?)
     }
 
     /// The context the detector runs on.
-    pub fn context(&self) -> &GpuContext {
+    pub fn context(&self) -> &ImageContext {
         &self.ctx
     }
 
     /// Uploads `mesh` once: vertices as f32 relative to the centre of its box, indices as u32.
     /// `name` labels the mesh in errors. Refuses meshes that are not closed, manifold and
     /// consistently oriented ([`ImageError::NotSolid`], with the topology report).
-    pub fn upload(&self, name: &str, mesh: &TriMesh) -> Result<GpuMesh, ImageError> {
+    pub fn upload(&self, name: &str, mesh: &TriMesh) -> Result<ImageMesh, ImageError> {
         self.upload_shared(name, Arc::new(mesh.clone()))
     }
 
     /// As [`ImageDetector::upload`], sharing the caller's `Arc` instead of copying the mesh.
-    pub fn upload_shared(&self, name: &str, mesh: Arc<TriMesh>) -> Result<GpuMesh, ImageError> {
+    pub fn upload_shared(&self, name: &str, mesh: Arc<TriMesh>) -> Result<ImageMesh, ImageError> {
         check_solid(name, &mesh)?;
         let aabb = mesh.aabb();
         let center = aabb.center();
@@ -467,7 +467,7 @@ impl ImageDetector {
         self.ctx
             .queue()
             .write_buffer(&indices, 0, bytemuck::cast_slice(&idx));
-        Ok(GpuMesh {
+        Ok(ImageMesh {
             detector: self.id,
             name: name.to_string(),
             vertices,
@@ -488,9 +488,9 @@ impl ImageDetector {
     pub fn query(
         &self,
         scratch: &mut ImageScratch,
-        a: &GpuMesh,
+        a: &ImageMesh,
         pose_a: &Pose,
-        b: &GpuMesh,
+        b: &ImageMesh,
         pose_b: &Pose,
         options: &ImageOptions,
     ) -> Result<ImageResult, ImageError> {
@@ -606,16 +606,16 @@ impl ImageDetector {
     /// [`ImageDetector::query`] with a fresh scratch (allocates textures each call).
     pub fn query_once(
         &self,
-        a: &GpuMesh,
+        a: &ImageMesh,
         pose_a: &Pose,
-        b: &GpuMesh,
+        b: &ImageMesh,
         pose_b: &Pose,
         options: &ImageOptions,
     ) -> Result<ImageResult, ImageError> {
         self.query(&mut ImageScratch::default(), a, pose_a, b, pose_b, options)
     }
 
-    fn bounds(&self, view: &View, a: &GpuMesh, b: &GpuMesh, rel: &Pose) -> ErrorBounds {
+    fn bounds(&self, view: &View, a: &ImageMesh, b: &ImageMesh, rel: &Pose) -> ErrorBounds {
         let (iu, iv, iw) = view.axes();
         let mut c = DVec3::ZERO;
         c[iu] = view.u0 + 0.5 * view.width as f64 * view.pixel_size;
@@ -828,8 +828,8 @@ impl ImageDetector {
         &self,
         scratch: &mut ImageScratch,
         view: &View,
-        a: &GpuMesh,
-        b: &GpuMesh,
+        a: &ImageMesh,
+        b: &ImageMesh,
         rel: &Pose,
         options: &ImageOptions,
     ) -> Result<(Vec<f32>, Vec<u32>, [u32; 2]), ImageError> {

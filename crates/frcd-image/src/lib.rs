@@ -77,7 +77,7 @@
 //!
 //! ## GPU
 //!
-//! [`GpuContext::from_device`] takes an engine's device and queue; [`GpuContext::headless`] finds
+//! [`ImageContext::from_device`] takes an engine's device and queue; [`ImageContext::headless`] finds
 //! an adapter (a real GPU, or Mesa's software Vulkan driver lavapipe). No adapter is
 //! [`ImageError::NoAdapter`]. Required: `DEPTH32FLOAT_STENCIL8`, compute shaders, 3 storage
 //! buffers per stage; the resolution is bounded by the device's texture and storage-buffer limits.
@@ -109,16 +109,16 @@ mod error;
 pub mod reference;
 mod view;
 
-pub use context::GpuContext;
+pub use context::ImageContext;
 pub use detector::{
-    CollidingSet, ErrorBounds, GpuMesh, ImageDetector, ImageOptions, ImageResult, ImageScratch,
+    CollidingSet, ErrorBounds, ImageMesh, ImageDetector, ImageOptions, ImageResult, ImageScratch,
     PixelImage, check_solid,
 };
 #[doc(hidden)]
 pub use detector::{RASTER_WGSL, RESOLVE_WGSL};
 pub use error::{ImageError, Which};
 pub use view::{View, ViewAxis};
-/// The wgpu this crate is built on (to create a device for [`GpuContext::from_device`]).
+/// The wgpu this crate is built on (to create a device for [`ImageContext::from_device`]).
 pub use wgpu;
 
 /// Every WGSL source of this crate, by file name (for validation and tooling).
@@ -132,9 +132,9 @@ mod send_sync {
     #[test]
     fn types_are_send_sync() {
         assert::<crate::ImageDetector>();
-        assert::<crate::GpuMesh>();
+        assert::<crate::ImageMesh>();
         assert::<crate::ImageScratch>();
-        assert::<crate::GpuContext>();
+        assert::<crate::ImageContext>();
         assert::<crate::ImageResult>();
     }
 }

@@ -44,7 +44,7 @@ fn open_non_manifold_and_misoriented_meshes_are_refused() {
 fn no_backend_means_no_adapter_error() {
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
     desc.backends = wgpu::Backends::empty();
-    match frcd_image::GpuContext::headless_with(desc) {
+    match frcd_image::ImageContext::headless_with(desc) {
         Err(ImageError::NoAdapter(msg)) => println!("no adapter: {msg}"),
         other => panic!("expected NoAdapter, got {other:?}"),
     }

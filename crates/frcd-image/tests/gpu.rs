@@ -4,7 +4,7 @@
 
 use frcd_geom::{DQuat, DVec2, DVec3, Pose, TriMesh, shapes};
 use frcd_image::reference::{agreement, reference_image};
-use frcd_image::{GpuMesh, ImageDetector, ImageError, ImageOptions, ImageResult, ImageScratch};
+use frcd_image::{ImageMesh, ImageDetector, ImageError, ImageOptions, ImageResult, ImageScratch};
 use std::f64::consts::PI;
 use std::sync::{Mutex, OnceLock};
 
@@ -74,7 +74,7 @@ fn inradius(m: &TriMesh) -> f64 {
 
 /// Every pixel where the GPU differs from the f64 reference must be explained by the bounds, and
 /// lengths must agree to a few depth bounds elsewhere.
-fn check_reference(r: &ImageResult, a: &GpuMesh, b: &GpuMesh, rel: &Pose) {
+fn check_reference(r: &ImageResult, a: &ImageMesh, b: &ImageMesh, rel: &Pose) {
     let view = r.view.as_ref().expect("boxes overlap");
     let reference = reference_image(view, &r.bounds, a.mesh(), &Pose::IDENTITY, b.mesh(), rel);
     let ag = agreement(r, &reference);
@@ -604,7 +604,7 @@ fn gl_is_refused_at_context_creation() {
     for backends in [wgpu::Backends::GL, wgpu::Backends::VULKAN] {
         let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
         desc.backends = backends;
-        match frcd_image::GpuContext::headless_with(desc) {
+        match frcd_image::ImageContext::headless_with(desc) {
             Err(ImageError::NoAdapter(e)) => println!("SKIP {backends:?}: {e}"),
             Err(ImageError::UnsupportedBackend { backend, .. }) => {
                 assert_eq!(backend, wgpu::Backend::Gl);

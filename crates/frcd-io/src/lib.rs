@@ -51,7 +51,7 @@ pub use mesh::{
 };
 pub use report::{FrameReport, Interference, PairSummary, Report};
 pub use scene::{
-    Body, BodySpec, Frame, FrameIter, FramePoses, Frames, PoseSpec, Scene, SceneFile, SceneOptions,
+    Body, SceneBody, Frame, FrameIter, FramePoses, Frames, PoseSpec, Scene, SceneFile, SceneOptions,
     UNIT_QUATERNION_TOLERANCE,
 };
 pub use trajectory::{TRAJECTORY_HEADER, Trajectory, TrajectoryRow};

@@ -73,7 +73,7 @@ pub(crate) fn pose_from_parts(t: [f64; 3], q: [f64; 4]) -> std::result::Result<P
 /// One body of a scene file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct BodySpec {
+pub struct SceneBody {
     /// Unique name.
     pub name: String,
     /// Mesh file (`.stl` or `.obj`), relative to the scene file's folder.
@@ -148,7 +148,7 @@ impl<'de> Deserialize<'de> for FramePoses {
 #[serde(deny_unknown_fields)]
 pub struct SceneFile {
     /// The bodies.
-    pub bodies: Vec<BodySpec>,
+    pub bodies: Vec<SceneBody>,
     /// Pairs of body names never to test against each other (parts assembled in contact).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub exclude: Vec<[String; 2]>,
