@@ -13,7 +13,9 @@
 use anyhow::{Result, bail};
 use frcd_benches::scenes;
 use frcd_geom::{Pose, TriMesh};
-use frcd_hybrid::{Backend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, Accuracy, Options};
+use frcd_hybrid::{
+    Accuracy, Backend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, Options,
+};
 use frcd_obb::oracle;
 use std::fmt::Write as _;
 use std::path::PathBuf;

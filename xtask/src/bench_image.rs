@@ -18,7 +18,7 @@
 
 use anyhow::{Result, bail};
 use frcd_geom::{DQuat, DVec2, DVec3, Pose, TriMesh, shapes};
-use frcd_image::{ImageMesh, ImageDetector, ImageOptions, ImageScratch};
+use frcd_image::{ImageDetector, ImageMesh, ImageOptions, ImageScratch};
 use std::f64::consts::PI;
 use std::fmt::Write as _;
 use std::path::PathBuf;

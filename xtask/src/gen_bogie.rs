@@ -16,7 +16,7 @@ use anyhow::{Context, Result, ensure};
 use frcd_geom::shapes::{self, CoilSpringParams, SweepFrame, WheelsetParams};
 use frcd_geom::{DQuat, DVec2, DVec3, Pose, TriMesh};
 use frcd_io::{
-    SceneBody, FrameReport, Interference, PoseSpec, Report, Scene, SceneFile, Trajectory,
+    FrameReport, Interference, PoseSpec, Report, Scene, SceneBody, SceneFile, Trajectory,
     TrajectoryRow, write_obj, write_stl_binary,
 };
 use frcd_obb::{BuildOptions, Mode, ObbTree, Request};

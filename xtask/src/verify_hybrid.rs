@@ -20,7 +20,7 @@ use anyhow::Result;
 use frcd_benches::scenes::Scene;
 use frcd_geom::{Pose, TriMesh};
 use frcd_hybrid::{
-    Backend as HBackend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, Accuracy, Options,
+    Accuracy, Backend as HBackend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, Options,
 };
 use frcd_image::reference::reference_image;
 use frcd_image::{ImageDetector, ImageOptions, ImageScratch};

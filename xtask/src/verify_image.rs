@@ -20,7 +20,7 @@ use anyhow::Result;
 use frcd_benches::scenes::Scene;
 use frcd_geom::{Pose, Sphere, TriMesh};
 use frcd_image::reference::{agreement, reference_image};
-use frcd_image::{ImageMesh, ImageDetector, ImageError, ImageOptions, ImageScratch};
+use frcd_image::{ImageDetector, ImageError, ImageMesh, ImageOptions, ImageScratch};
 use std::collections::HashMap;
 use std::sync::Arc;
 

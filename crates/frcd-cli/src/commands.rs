@@ -4,7 +4,7 @@ use crate::{BackendArg, CheckerArgs, ModeArg};
 use anyhow::{Context, Result, bail};
 use frcd_geom::Pose;
 use frcd_hybrid::{
-    Backend, BodySpec, Checker, Contact, CostModel, FrameResult, FrameState, Accuracy, Options,
+    Accuracy, Backend, BodySpec, Checker, Contact, CostModel, FrameResult, FrameState, Options,
     StageBackend,
 };
 use frcd_io::{FrameReport, Interference, Report, Scene};

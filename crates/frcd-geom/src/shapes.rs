@@ -369,7 +369,11 @@ fn triangulate_polygon(poly: &[DVec2]) -> Option<Vec<[u32; 3]>> {
 /// orientation to come out outward directly; otherwise the whole mesh is flipped, which is also
 /// correct. The swept tube must not self-intersect (not checked).
 /// `2 · |profile| · (rings − 1 or rings)` side triangles, plus `2 (|profile| − 2)` in caps.
-pub fn sweep(profile: &[DVec2], frames: &[SweepFrame], closed: bool) -> Result<TriMesh, ShapeError> {
+pub fn sweep(
+    profile: &[DVec2],
+    frames: &[SweepFrame],
+    closed: bool,
+) -> Result<TriMesh, ShapeError> {
     const S: &str = "sweep";
     check(profile.len() >= 3, S, "profile", "needs at least 3 points")?;
     finite_profile(profile, S)?;

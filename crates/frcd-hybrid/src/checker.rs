@@ -7,7 +7,7 @@ use crate::gpu::Gpgpu;
 #[cfg(feature = "image")]
 use crate::gpu::Image;
 use crate::report::{PairClearance, PairContact, Stage, StageBackend, StageReport, Via};
-use crate::{Backend, BodySpec, FrameResult, FrameState, HybridError, Accuracy, Options};
+use crate::{Accuracy, Backend, BodySpec, FrameResult, FrameState, HybridError, Options};
 use frcd_geom::{Pose, TriMesh};
 use frcd_obb::{ObbTree, World, WorldOptions};
 use rayon::prelude::*;

@@ -5,7 +5,7 @@
 
 #[cfg(feature = "gpgpu")]
 use crate::exact::{Job, Plan};
-use crate::{Backend, Checker, FrameResult, GpuFailure, GpuPolicy, HybridError, Accuracy};
+use crate::{Accuracy, Backend, Checker, FrameResult, GpuFailure, GpuPolicy, HybridError};
 #[cfg(feature = "gpgpu")]
 use crate::{FrameState, report::Via};
 #[allow(unused_imports)]

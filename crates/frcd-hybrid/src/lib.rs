@@ -110,7 +110,7 @@ pub use cost::{CostModel, CostModelError};
 pub use error::{GpuFailure, HybridError};
 pub use frcd_obb::Containment;
 pub use frcd_tritri::Contact;
-pub use options::{Backend, BodySpec, GpuPolicy, Accuracy, Options};
+pub use options::{Accuracy, Backend, BodySpec, GpuPolicy, Options};
 pub use pipeline::Pipeline;
 pub use report::{FrameResult, PairClearance, PairContact, Stage, StageBackend, StageReport, Via};
 pub use state::FrameState;

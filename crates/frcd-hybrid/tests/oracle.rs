@@ -2,7 +2,7 @@
 
 use frcd_geom::{DQuat, DVec3, Pose, TriMesh, shapes};
 use frcd_hybrid::{
-    Backend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, HybridError, Accuracy, Options,
+    Accuracy, Backend, BodySpec, Checker, CostModel, FrameState, GpuPolicy, HybridError, Options,
     Stage, StageBackend, Via,
 };
 use frcd_obb::oracle;

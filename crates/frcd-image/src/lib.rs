@@ -111,7 +111,7 @@ mod view;
 
 pub use context::ImageContext;
 pub use detector::{
-    CollidingSet, ErrorBounds, ImageMesh, ImageDetector, ImageOptions, ImageResult, ImageScratch,
+    CollidingSet, ErrorBounds, ImageDetector, ImageMesh, ImageOptions, ImageResult, ImageScratch,
     PixelImage, check_solid,
 };
 #[doc(hidden)]

@@ -4,7 +4,7 @@
 
 use frcd_geom::{DQuat, DVec2, DVec3, Pose, TriMesh, shapes};
 use frcd_image::reference::{agreement, reference_image};
-use frcd_image::{ImageMesh, ImageDetector, ImageError, ImageOptions, ImageResult, ImageScratch};
+use frcd_image::{ImageDetector, ImageError, ImageMesh, ImageOptions, ImageResult, ImageScratch};
 use std::f64::consts::PI;
 use std::sync::{Mutex, OnceLock};
 

@@ -51,8 +51,8 @@ pub use mesh::{
 };
 pub use report::{FrameReport, Interference, PairSummary, Report};
 pub use scene::{
-    Body, SceneBody, Frame, FrameIter, FramePoses, Frames, PoseSpec, Scene, SceneFile, SceneOptions,
-    UNIT_QUATERNION_TOLERANCE,
+    Body, Frame, FrameIter, FramePoses, Frames, PoseSpec, Scene, SceneBody, SceneFile,
+    SceneOptions, UNIT_QUATERNION_TOLERANCE,
 };
 pub use trajectory::{TRAJECTORY_HEADER, Trajectory, TrajectoryRow};
 pub use write::{write_obj, write_stl_binary};
