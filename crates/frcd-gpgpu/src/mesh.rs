@@ -1,6 +1,6 @@
 use crate::pack::{NODE_TEXELS, PackedTree, TRI_TEXELS, TexLayout, pack_tree_rows};
 use crate::{GpuContext, GpuError};
-use frcd_geom::Triangle;
+use frcd_geom::TriMesh;
 use frcd_obb::ObbTree;
 use std::sync::Arc;
 
@@ -297,14 +297,15 @@ pub struct GpuMesh {
     pub(crate) node_base: u32,
     pub(crate) tri_base: u32,
     pub(crate) depth: u32,
-    pub(crate) triangles: Arc<[Triangle]>,
+    /// The tree's mesh (shared, not copied), for the CPU's exact re-decision.
+    pub(crate) mesh: Arc<TriMesh>,
     bytes: u64,
 }
 
 impl std::fmt::Debug for GpuMesh {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("GpuMesh")
-            .field("triangles", &self.triangles.len())
+            .field("triangles", &self.mesh.triangle_count())
             .field("depth", &self.depth)
             .field("node_base", &self.node_base)
             .field("tri_base", &self.tri_base)
@@ -315,7 +316,7 @@ impl std::fmt::Debug for GpuMesh {
 impl GpuMesh {
     /// Number of triangles.
     pub fn triangle_count(&self) -> usize {
-        self.triangles.len()
+        self.mesh.triangle_count()
     }
     /// Depth of the tree (a single leaf: 1).
     pub fn depth(&self) -> u32 {
@@ -380,7 +381,7 @@ impl GpuContext {
             node_base: node_base as u32,
             tri_base: tri_base as u32,
             depth,
-            triangles: tree.triangles().collect(),
+            mesh: tree.mesh().clone(),
             bytes,
         })
     }

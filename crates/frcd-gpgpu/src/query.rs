@@ -1,5 +1,5 @@
 use crate::{GpuContext, GpuError, GpuMesh};
-use frcd_geom::{Pose, Triangle};
+use frcd_geom::{Pose, TriMesh};
 use frcd_gpu::layout::{PairInfo, Params, State};
 use frcd_obb::RelativeFrame;
 use frcd_tritri::Method;
@@ -228,7 +228,8 @@ impl QueryScratch {
 
 /// A batch checked and converted for the GPU; independent of the meshes' lifetimes.
 /// The triangles of A and B of one body pair (shared with the meshes).
-type TrianglePair = (Arc<[Triangle]>, Arc<[Triangle]>);
+/// The two meshes of a pair (shared with their trees, not copied), for the exact re-decision.
+type TrianglePair = (Arc<TriMesh>, Arc<TriMesh>);
 
 struct Prepared {
     /// One `PairInfo` per pair.
@@ -506,7 +507,7 @@ impl GpuContext {
             }
             p.infos.push(pair_info(&frame, a, b));
             p.frames.push(frame);
-            p.tris.push((a.triangles.clone(), b.triangles.clone()));
+            p.tris.push((a.mesh.clone(), b.mesh.clone()));
             p.levels = p.levels.max(a.depth.max(b.depth));
         }
         Ok(p)
@@ -647,8 +648,10 @@ impl GpuContext {
             let (Some(frame), Some((ta, tb))) = (p.frames.get(k), p.tris.get(k)) else {
                 return Err(GpuError::Internal(format!("pair index {k} out of range")));
             };
-            let (ta, tb) = match (ta.get(ia as usize), tb.get(ib as usize)) {
-                (Some(ta), Some(tb)) => (ta, tb),
+            let (ta, tb) = match (ia as usize, ib as usize) {
+                (ia, ib) if ia < ta.triangle_count() && ib < tb.triangle_count() => {
+                    (ta.triangle(ia), tb.triangle(ib))
+                }
                 _ => {
                     return Err(GpuError::Internal(format!(
                         "pair {k}: triangle pair ({ia}, {ib}) out of range"
@@ -659,7 +662,7 @@ impl GpuContext {
             // Every pair is re-decided exactly: the GPU's "touching" is not trusted (WGSL's
             // float rules, a driver bug); the exact test's filter makes this a few hundred
             // nanoseconds per reported pair, small next to the readback.
-            let touch = frcd_tritri::intersects(Method::Exact, ta, &frame.triangle(tb));
+            let touch = frcd_tritri::intersects(Method::Exact, &ta, &frame.triangle(&tb));
             if tag & UNCERTAIN_FLAG == 0 {
                 if touch {
                     r.gpu_decided += 1;
