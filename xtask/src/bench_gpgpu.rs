@@ -761,38 +761,8 @@ fn plot(path: &std::path::Path, rows: &[PairRow], threads: usize, adapter: &str)
     plot::write_svg(path, (860, 520), &[chart])
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn plot_writes_every_series() {
-        let rows: Vec<PairRow> = (1..=4)
-            .map(|l| PairRow {
-                level: l,
-                triangles: 20 * 4usize.pow(l),
-                touching: 10,
-                uncertain: 0,
-                cpu1: 0.01 * 3f64.powi(l as i32),
-                cpu_all: 0.006 * 3f64.powi(l as i32),
-                gpu: 0.5 + 0.1 * l as f64,
-                upload: 1.0,
-            })
-            .collect();
-        let path =
-            std::env::temp_dir().join(format!("frcd-xtask-gpgpu-{}.svg", std::process::id()));
-        plot(&path, &rows, 2, "test adapter").unwrap();
-        let svg = std::fs::read_to_string(&path).unwrap();
-        for s in [
-            "CPU 1 thread",
-            "CPU 2 threads",
-            "GPU (transfers incl.)",
-            "test adapter",
-        ] {
-            assert!(svg.contains(s), "{s} missing");
-        }
-    }
-}
+/// A contact as compared between modes: body pair and its triangle pairs.
+type ContactKey = (usize, usize, Vec<(u32, u32)>);
 
 struct CheckerRow {
     parts: usize,
@@ -833,7 +803,7 @@ fn checker_row(n: usize, runs: usize) -> Result<CheckerRow> {
     let c_cpu = Checker::new(bodies.clone(), &[], cpu)?;
     let c_gpu = Checker::new(bodies.clone(), &[], gpu.clone())?;
     let c_pipe = Checker::new(bodies, &[], gpu)?;
-    let key = |r: &frcd_hybrid::FrameResult| -> Vec<(usize, usize, Vec<(u32, u32)>)> {
+    let key = |r: &frcd_hybrid::FrameResult| -> Vec<ContactKey> {
         r.contacts
             .iter()
             .map(|c| (c.a, c.b, c.pairs.clone()))
@@ -899,4 +869,37 @@ fn checker_row(n: usize, runs: usize) -> Result<CheckerRow> {
         plain,
         piped,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plot_writes_every_series() {
+        let rows: Vec<PairRow> = (1..=4)
+            .map(|l| PairRow {
+                level: l,
+                triangles: 20 * 4usize.pow(l),
+                touching: 10,
+                uncertain: 0,
+                cpu1: 0.01 * 3f64.powi(l as i32),
+                cpu_all: 0.006 * 3f64.powi(l as i32),
+                gpu: 0.5 + 0.1 * l as f64,
+                upload: 1.0,
+            })
+            .collect();
+        let path =
+            std::env::temp_dir().join(format!("frcd-xtask-gpgpu-{}.svg", std::process::id()));
+        plot(&path, &rows, 2, "test adapter").unwrap();
+        let svg = std::fs::read_to_string(&path).unwrap();
+        for s in [
+            "CPU 1 thread",
+            "CPU 2 threads",
+            "GPU (transfers incl.)",
+            "test adapter",
+        ] {
+            assert!(svg.contains(s), "{s} missing");
+        }
+    }
 }
