@@ -387,3 +387,25 @@ fn plot_clearance_subcommand_writes_the_same_svg() {
     assert_clean_failure(&o, "needs a clearance threshold");
     assert!(!dir.join("x.svg").exists());
 }
+
+/// `frcd plot-clearance -o` never overwrites one of the run's inputs (the scene file here):
+/// refused before any work, the input left as it was.
+#[test]
+fn plot_clearance_refuses_to_overwrite_its_scene() {
+    let dir = tempdir("plotinput");
+    scene(&dir, "");
+    let before = std::fs::read(dir.join("scene.json")).unwrap();
+    let o = frcd(
+        &[
+            "plot-clearance",
+            "scene.json",
+            "--clearance",
+            "0.005",
+            "-o",
+            "scene.json",
+        ],
+        &dir,
+    );
+    assert_clean_failure(&o, "one of the run's inputs");
+    assert_eq!(std::fs::read(dir.join("scene.json")).unwrap(), before);
+}

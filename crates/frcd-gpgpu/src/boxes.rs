@@ -141,6 +141,16 @@ pub(crate) fn body_box(b: &Aabb) -> BodyBox {
     }
 }
 
+/// Refuses a box with a NaN coordinate (both box passes; an empty or infinite box is fine).
+pub(crate) fn check_boxes(boxes: &[Aabb]) -> Result<(), GpuError> {
+    match boxes.iter().position(|b| b.min.is_nan() || b.max.is_nan()) {
+        Some(i) => Err(GpuError::InvalidInput(format!(
+            "box {i} has a NaN coordinate"
+        ))),
+        None => Ok(()),
+    }
+}
+
 impl GpuContext {
     /// The all-pairs form of [`GpuContext::overlapping_bodies`] (O(n²) comparisons, tiled in
     /// workgroup memory): the same answer, kept as a reference and for small counts.
@@ -151,11 +161,7 @@ impl GpuContext {
         boxes: &[Aabb],
         scratch: &mut BoxScratch,
     ) -> Result<BodyPairs, GpuError> {
-        if let Some(i) = boxes.iter().position(|b| b.min.is_nan() || b.max.is_nan()) {
-            return Err(GpuError::InvalidInput(format!(
-                "box {i} has a NaN coordinate"
-            )));
-        }
+        check_boxes(boxes)?;
         let n = boxes.len();
         let mut answer = BodyPairs::default();
         if n < 2 {

@@ -1,6 +1,8 @@
 //! The GPU broad phase in O(n log n + pairs): sort-based sweep and prune (`shaders/sweep.wgsl`).
 
-use crate::boxes::{BodyPairs, BoxScratch, MAX_RERUNS, UNCERTAIN_FLAG, body_box, decode};
+use crate::boxes::{
+    BodyPairs, BoxScratch, MAX_RERUNS, UNCERTAIN_FLAG, body_box, check_boxes, decode,
+};
 use crate::{GpuContext, GpuError};
 use frcd_geom::Aabb;
 use frcd_gpu::layout::{BodyBox, BoxParams, SortStage};
@@ -267,11 +269,7 @@ impl GpuContext {
         boxes: &[Aabb],
         scratch: &mut BoxScratch,
     ) -> Result<BodyPairs, GpuError> {
-        if let Some(i) = boxes.iter().position(|b| b.min.is_nan() || b.max.is_nan()) {
-            return Err(GpuError::InvalidInput(format!(
-                "box {i} has a NaN coordinate"
-            )));
-        }
+        check_boxes(boxes)?;
         let n = boxes.len();
         let mut answer = BodyPairs::default();
         if n < 2 {
