@@ -23,6 +23,7 @@
 
 mod build;
 mod checked;
+mod lanes;
 pub mod distance;
 mod nodes;
 pub mod oracle;
