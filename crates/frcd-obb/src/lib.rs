@@ -23,7 +23,6 @@
 
 mod build;
 mod checked;
-mod lanes;
 pub mod distance;
 mod nodes;
 pub mod oracle;

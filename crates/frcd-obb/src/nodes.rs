@@ -50,17 +50,15 @@ pub(crate) const LEAF: u32 = 1 << 31;
 /// One traversal node: an f32 box in the mesh's local frame that holds every triangle below
 /// it, and a link (internal node: index of the right child, the left one being the next node;
 /// leaf: [`LEAF`] | first entry in the leaf order, its length kept in the tree's end bits).
-///
-/// The axes are stored transposed, in rows ready for four-lane arithmetic: row `k` holds the
-/// `k`-th coordinate of the three axes and, in its last lane, of the centre.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C, align(64))]
 pub(crate) struct TNode {
-    /// Row `k`: `(u[0][k], u[1][k], u[2][k], c[k])` (axis `i` is `u[i]`, orthonormal up to
-    /// [`ETA`]; `c` is the centre).
-    pub w: [[f32; 4]; 3],
+    /// Centre.
+    pub c: [f32; 3],
     /// Half extents along `u[0..3]`, outward-rounded.
     pub h: [f32; 3],
+    /// The box axes (`u[k]` is axis `k`), orthonormal up to [`ETA`].
+    pub u: [[f32; 3]; 3],
     /// See the type docs.
     pub link: u32,
 }
@@ -68,27 +66,6 @@ pub(crate) struct TNode {
 const _: () = assert!(std::mem::size_of::<TNode>() == 64);
 
 impl TNode {
-    /// A node from its centre, half extents, axes (`u[k]` is axis `k`) and link.
-    #[inline]
-    pub fn new(c: [f32; 3], h: [f32; 3], u: [[f32; 3]; 3], link: u32) -> Self {
-        let row = |k: usize| [u[0][k], u[1][k], u[2][k], c[k]];
-        TNode {
-            w: [row(0), row(1), row(2)],
-            h,
-            link,
-        }
-    }
-    /// The centre.
-    #[inline(always)]
-    pub fn c(&self) -> [f32; 3] {
-        [self.w[0][3], self.w[1][3], self.w[2][3]]
-    }
-    /// The axes (`u()[k]` is axis `k`).
-    #[inline(always)]
-    pub fn u(&self) -> [[f32; 3]; 3] {
-        let axis = |i: usize| [self.w[0][i], self.w[1][i], self.w[2][i]];
-        [axis(0), axis(1), axis(2)]
-    }
     /// True for a leaf.
     #[inline(always)]
     pub fn is_leaf(&self) -> bool {
@@ -107,7 +84,7 @@ impl TNode {
     /// The centre in f64.
     #[inline(always)]
     pub fn center(&self) -> DVec3 {
-        v64(self.c())
+        v64(self.c)
     }
     /// The half extents in f64.
     #[inline(always)]
@@ -117,8 +94,7 @@ impl TNode {
     /// The axes as the columns of an f64 matrix (exact widening).
     #[inline(always)]
     pub fn axes(&self) -> DMat3 {
-        let u = self.u();
-        DMat3::from_cols(v64(u[0]), v64(u[1]), v64(u[2]))
+        DMat3::from_cols(v64(self.u[0]), v64(self.u[1]), v64(self.u[2]))
     }
     /// `|h|²`, the size used to choose which box to split.
     #[inline(always)]
@@ -130,7 +106,7 @@ impl TNode {
     /// the node's geometry: the f32 axes orthonormalised, the half extents the exact
     /// projection radii of the f32 parallelepiped onto them, rounded up.
     pub fn obb(&self) -> Obb {
-        let u = self.u().map(v64);
+        let u = [v64(self.u[0]), v64(self.u[1]), v64(self.u[2])];
         let q = orthonormal(u).unwrap_or(DMat3::IDENTITY);
         Obb {
             center: self.center(),
@@ -222,7 +198,7 @@ pub(crate) fn compact(nodes: &[Node], order_len: usize) -> (Vec<TNode>, Vec<u64>
             } else {
                 n.right
             };
-            TNode::new(c, h, u, link)
+            TNode { c, h, u, link }
         })
         .collect();
     (out, ends)
@@ -277,14 +253,14 @@ mod tests {
                 half_extents: DVec3::new(1e-3 * (k + 1) as f64, 0.5, 0.0),
             };
             let (c, h, u) = compact_box(&obb);
-            let n = TNode::new(c, h, u, 0);
+            let n = TNode { c, h, u, link: 0 };
             let a = [obb.axes.x_axis, obb.axes.y_axis, obb.axes.z_axis];
             for p in corners(obb.center, a, obb.half_extents) {
                 assert!(inside_f32(&n, p), "box {k}: corner {p:?} outside");
             }
             // The f64 view holds the f32 box.
             let view = n.obb();
-            for p in corners(n.center(), n.u().map(v64), n.half()) {
+            for p in corners(n.center(), [0, 1, 2].map(|i| v64(n.u[i])), n.half()) {
                 let s = view.axes.transpose() * (p - view.center);
                 // The corner and its projection round by a few ulp of the coordinates.
                 let tol = 8.0 * f64::EPSILON * (p.length() + view.center.length());
@@ -311,7 +287,7 @@ mod tests {
             half_extents: DVec3::new(1.0, 2.0, 3.0),
         };
         let (c, h, u) = compact_box(&obb);
-        let n = TNode::new(c, h, u, 0);
+        let n = TNode { c, h, u, link: 0 };
         assert!(gram_deviation(&u.map(v64)) <= ETA);
         for p in corners(obb.center, [a.x_axis, a.y_axis, a.z_axis], obb.half_extents) {
             assert!(inside_f32(&n, p));

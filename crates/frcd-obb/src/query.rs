@@ -2,7 +2,7 @@
 //! with the hybrid top volume, optional solid-mode containment and a caller-owned coherence
 //! cache.
 
-use crate::sat::{BoxTest, SLACK_REL, Sat32, Sat64};
+use crate::sat::{self, Placed, SLACK_REL};
 use crate::solid::point_inside;
 use crate::tree::ObbTree;
 use frcd_geom::{Aabb, DMat3, DVec3, Pose, Triangle};
@@ -292,12 +292,13 @@ impl PairCache {
 }
 
 /// The traversal stack: node pairs, each naming its B box (placed in A's frame) in `placed`.
-struct Stack<P> {
+#[derive(Default)]
+struct Stack {
     pairs: Vec<(u32, u32, u32)>,
-    placed: Vec<P>,
+    placed: Vec<Placed>,
 }
 
-impl<P> Stack<P> {
+impl Stack {
     fn new() -> Self {
         Stack {
             pairs: Vec::with_capacity(64),
@@ -306,59 +307,25 @@ impl<P> Stack<P> {
     }
 }
 
-struct Ctx<'a, S> {
+struct Ctx<'a> {
     a: &'a ObbTree,
     b: &'a ObbTree,
     frame: RelativeFrame,
     slack: f64,
     method: Method,
     counters: Counters,
-    sat: S,
 }
 
-/// Runs `$body` with `$ctx` bound to the query's context over the f32 box test, or over the
-/// f64 one when the query's magnitudes do not fit f32 (`sat.rs`).
-macro_rules! with_ctx {
-    ($a:expr, $pose_a:expr, $b:expr, $pose_b:expr, $method:expr, |$ctx:ident| $body:expr) => {{
-        let (a, b) = ($a, $b);
-        let frame = RelativeFrame::new($pose_a, $pose_b);
-        let slack = query_slack(a, b, &frame);
-        let mag = a.radius_from_origin + b.radius_from_origin + frame.t.length();
-        match Sat32::new(frame.m, frame.t, slack, mag) {
-            Some(sat) => {
-                let $ctx = Ctx::new(a, b, frame, slack, $method, sat);
-                $body
-            }
-            None => {
-                let sat = Sat64 {
-                    m: frame.m,
-                    t: frame.t,
-                    slack,
-                };
-                let $ctx = Ctx::new(a, b, frame, slack, $method, sat);
-                $body
-            }
-        }
-    }};
-}
-
-impl<'a, S: BoxTest> Ctx<'a, S> {
-    fn new(
-        a: &'a ObbTree,
-        b: &'a ObbTree,
-        frame: RelativeFrame,
-        slack: f64,
-        method: Method,
-        sat: S,
-    ) -> Self {
+impl<'a> Ctx<'a> {
+    fn new(a: &'a ObbTree, pose_a: &Pose, b: &'a ObbTree, pose_b: &Pose, method: Method) -> Self {
+        let frame = RelativeFrame::new(pose_a, pose_b);
         Ctx {
             a,
             b,
-            slack,
+            slack: query_slack(a, b, &frame),
             frame,
             method,
             counters: Counters::default(),
-            sat,
         }
     }
 
@@ -380,16 +347,16 @@ impl<'a, S: BoxTest> Ctx<'a, S> {
     }
 
     #[inline]
-    fn place(&mut self, j: u32) -> S::Placed {
+    fn place(&mut self, j: u32) -> Placed {
         self.counters.placements += 1;
-        self.sat.place(&self.b.nodes[j as usize])
+        Placed::new(&self.b.nodes[j as usize], &self.frame.m, self.frame.t)
     }
 
     /// The separating axis and margin of node `i` of A against a placed box of B, if any.
     #[inline]
-    fn separation(&mut self, i: u32, pb: &S::Placed) -> Option<(u8, f64)> {
+    fn separation(&mut self, i: u32, pb: &Placed) -> Option<(u8, f64)> {
         self.counters.box_tests += 1;
-        self.sat.separation(&self.a.nodes[i as usize], pb)
+        sat::separation(&self.a.nodes[i as usize], pb, self.slack)
     }
 
     /// The two children of a node pair in the traversal tree (descend into the bigger box; a
@@ -453,7 +420,7 @@ impl<'a, S: BoxTest> Ctx<'a, S> {
         &mut self,
         i: u32,
         j: u32,
-        stack: &mut Stack<S::Placed>,
+        stack: &mut Stack,
         mut front: Option<(&mut Vec<FrontEntry>, f64)>,
         hit: &mut impl FnMut(u32, u32) -> bool,
     ) -> bool {
@@ -575,7 +542,7 @@ pub(crate) fn contained(
     None
 }
 
-fn finish<S: BoxTest>(ctx: &Ctx<'_, S>, request: &Request, mut c: Collision) -> Collision {
+fn finish(ctx: &Ctx<'_>, request: &Request, mut c: Collision) -> Collision {
     if request.mode == Mode::AllPairs {
         c.pairs.sort_unstable();
         c.witness = c.pairs.first().copied();
@@ -628,12 +595,7 @@ pub fn collide(
     pose_b: &Pose,
     request: &Request,
 ) -> Collision {
-    with_ctx!(a, pose_a, b, pose_b, request.method, |ctx| collide_with(
-        ctx, request
-    ))
-}
-
-fn collide_with<S: BoxTest>(mut ctx: Ctx<'_, S>, request: &Request) -> Collision {
+    let mut ctx = Ctx::new(a, pose_a, b, pose_b, request.method);
     let mut c = Collision::default();
     if ctx.top_rejects(request.top_volume) {
         // Disjoint bounding volumes: neither contact nor containment.
@@ -673,17 +635,7 @@ pub fn collide_cached(
     request: &Request,
     cache: &mut PairCache,
 ) -> Collision {
-    with_ctx!(a, pose_a, b, pose_b, request.method, |ctx| collide_cached_with(
-        ctx, request, cache
-    ))
-}
-
-fn collide_cached_with<S: BoxTest>(
-    mut ctx: Ctx<'_, S>,
-    request: &Request,
-    cache: &mut PairCache,
-) -> Collision {
-    let (a, b) = (ctx.a, ctx.b);
+    let mut ctx = Ctx::new(a, pose_a, b, pose_b, request.method);
     cache.bind(a, b, &ctx.frame);
     let mut c = Collision::default();
     // Cheap rejections first: the top volume, then (first contact) the old witness pair.
@@ -802,8 +754,8 @@ fn hit_fn<'a>(
 /// kept as they are. Every leaf pair is covered exactly once whatever `old` holds, so the
 /// answer never depends on the cache. Returns `false` (the walk abandoned, its results
 /// incomplete) as soon as the walk's work exceeds `budget`.
-fn walk_front<S: BoxTest>(
-    ctx: &mut Ctx<'_, S>,
+fn walk_front(
+    ctx: &mut Ctx<'_>,
     old: &[FrontEntry],
     new: &mut Vec<FrontEntry>,
     clock: f64,

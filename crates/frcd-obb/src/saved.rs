@@ -114,9 +114,9 @@ impl ObbTree {
                 .nodes
                 .iter()
                 .map(|n| SavedNode {
-                    c: n.c(),
+                    c: n.c,
                     h: n.h,
-                    u: n.u(),
+                    u: n.u,
                     link: n.link,
                 })
                 .collect(),
@@ -202,7 +202,12 @@ impl ObbTree {
             if !ok {
                 return corrupt("child or leaf start out of range", i);
             }
-            nodes.push(TNode::new(s.c, s.h, s.u, s.link));
+            nodes.push(TNode {
+                c: s.c,
+                h: s.h,
+                u: s.u,
+                link: s.link,
+            });
         }
         Ok(ObbTree::from_compact(mesh, nodes, saved.order, saved.ends))
     }
