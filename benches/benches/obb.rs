@@ -323,7 +323,7 @@ fn split(p: &Pair) {
             Mode::AllPairs => "all",
         };
         eprintln!(
-            "[split] {} {label}: steps disjoint {} touching {} | median us disjoint/touching: frcd {:.1}/{:.1}, cached {:.1}/{:.1}, parry3d-f64 {:.1}/{:.1} | total ms: frcd {:.2}, cached {:.2}, parry3d-f64 {:.2} | parry/frcd {:.2}x (best of frcd, cached {:.2}x) | frcd per query: disjoint {:.0} box {:.0} tri, touching {:.0} box {:.0} tri; {:.1} ns per box test (disjoint steps, all work)",
+            "[split] {} {label}: steps disjoint {} touching {} | median us disjoint/touching: frcd {:.1}/{:.1}, cached {:.1}/{:.1}, parry3d-f64 {:.1}/{:.1} | total ms: frcd {:.2}, cached {:.2}, parry3d-f64 {:.2} | parry/frcd {:.2}x (best of frcd, cached {:.2}x) | frcd per query: disjoint {:.0} box {:.0} tri {:.0} placements, touching {:.0} box {:.0} tri; {:.1} ns per box test (disjoint steps, all work)",
             p.scene.name,
             touching.iter().filter(|x| !**x).count(),
             touching.iter().filter(|x| **x).count(),
@@ -340,6 +340,7 @@ fn split(p: &Pair) {
             total(1) / total(0),
             cd.box_tests as f64 / nd,
             cd.tri_tests as f64 / nd,
+            cd.placements as f64 / nd,
             ct.box_tests as f64 / nt,
             ct.tri_tests as f64 / nt,
             sd * 1e9 / cd.box_tests.max(1) as f64,
