@@ -346,14 +346,14 @@ impl<'a> Ctx<'a> {
         !bb.intersects(&self.a.aabb.inflated(self.slack))
     }
 
-    #[inline]
+    #[inline(always)]
     fn place(&mut self, j: u32) -> Placed {
         self.counters.placements += 1;
         Placed::new(&self.b.nodes[j as usize], &self.frame.m, self.frame.t)
     }
 
     /// The separating axis and margin of node `i` of A against a placed box of B, if any.
-    #[inline]
+    #[inline(always)]
     fn separation(&mut self, i: u32, pb: &Placed) -> Option<(u8, f64)> {
         self.counters.box_tests += 1;
         sat::separation(&self.a.nodes[i as usize], pb, self.slack)
@@ -361,7 +361,7 @@ impl<'a> Ctx<'a> {
 
     /// The two children of a node pair in the traversal tree (descend into the bigger box; a
     /// rule that depends on the trees only, so the traversal tree is the same every query).
-    #[inline]
+    #[inline(always)]
     fn children(&self, i: u32, j: u32) -> [(u32, u32); 2] {
         let na = &self.a.nodes[i as usize];
         let nb = &self.b.nodes[j as usize];
@@ -379,7 +379,7 @@ impl<'a> Ctx<'a> {
         }
     }
 
-    #[inline]
+    #[inline(always)]
     fn both_leaves(&self, i: u32, j: u32) -> bool {
         self.a.nodes[i as usize].is_leaf() && self.b.nodes[j as usize].is_leaf()
     }
