@@ -839,18 +839,40 @@ fn checker_row(n: usize, runs: usize) -> Result<CheckerRow> {
         }
     }
     let nf = frames.len() as f64;
+    // Where a frame's time goes: the reported stage times (broad, narrow) of every timed frame.
+    let (mut cpu_stages, mut gpu_stages) = (Vec::new(), Vec::new());
+    let stages = |r: &frcd_hybrid::FrameResult| (r.stages[0].time_us, r.stages[2].time_us);
     let mut s1 = FrameState::default();
     let cpu_ms = median_ms(runs, || {
         for poses in &frames {
-            std::hint::black_box(c_cpu.check(poses, &mut s1).expect("checked"));
+            let r = c_cpu.check(poses, &mut s1).expect("checked");
+            cpu_stages.push(stages(&r));
+            std::hint::black_box(r);
         }
     }) / nf;
     let mut s2 = FrameState::default();
     let plain = median_ms(runs, || {
         for poses in &frames {
-            std::hint::black_box(c_gpu.check(poses, &mut s2).expect("checked"));
+            let r = c_gpu.check(poses, &mut s2).expect("checked");
+            gpu_stages.push(stages(&r));
+            std::hint::black_box(r);
         }
     }) / nf;
+    let median_stages = |v: &[(f64, f64)]| {
+        let mid = |mut x: Vec<f64>| {
+            x.sort_by(f64::total_cmp);
+            x.get(x.len() / 2).copied().unwrap_or(0.0) / 1e3
+        };
+        (
+            mid(v.iter().map(|s| s.0).collect()),
+            mid(v.iter().map(|s| s.1).collect()),
+        )
+    };
+    let (cb, cn) = median_stages(&cpu_stages);
+    let (gb, gn) = median_stages(&gpu_stages);
+    println!(
+        "checker, {n} parts, median stage times per frame: CPU backend broad {cb:.2} ms, narrow {cn:.2} ms; GPGPU check broad (GPU box pass) {gb:.2} ms, narrow (one pair batch, exact re-decision, containment) {gn:.2} ms"
+    );
     let mut pipe = Pipeline::new();
     let piped = median_ms(runs, || {
         for poses in &frames {

@@ -14,7 +14,7 @@
 //   node i: 5 texels  (c.xyz, 0) (a0.xyz, h0) (a1.xyz, h1) (a2.xyz, h2) (right, first, count, 0)
 //   triangle j (leaf order): 3 texels (v0.xyz, mesh index) (v1.xyz, 0) (v2.xyz, 0)
 // Node and triangle indices inside an item are relative to the mesh's base; item i lives at
-// row-major slot i of (layer, row, column group); see `load`.
+// row-major slot i of (layer, row, column group); see `slot`.
 
 const WG: u32 = 64u;
 
@@ -75,21 +75,25 @@ struct Node {
     count: u32,
 }
 
-fn load(t: texture_2d_array<f32>, lay: vec4<u32>, per_item: u32, i: u32, k: u32) -> vec4<f32> {
+// Texel coordinates (column of the item's first texel, row, layer) of item i: the integer
+// divisions are done once per item, not once per texel (a software driver emulates them lane
+// by lane).
+fn slot(lay: vec4<u32>, per_item: u32, i: u32) -> vec3<u32> {
     let row_g = i / lay.x;
-    let col = (i % lay.x) * per_item + k;
-    let layer = row_g / lay.y;
-    let row = row_g % lay.y;
-    return textureLoad(t, vec2<u32>(col, row), layer, 0);
+    return vec3<u32>((i - row_g * lay.x) * per_item, row_g % lay.y, row_g / lay.y);
+}
+
+fn texel(t: texture_2d_array<f32>, s: vec3<u32>, k: u32) -> vec4<f32> {
+    return textureLoad(t, vec2<u32>(s.x + k, s.y), s.z, 0);
 }
 
 fn load_node(i: u32) -> Node {
-    let lay = arena.node_layout;
-    let t0 = load(nodes, lay, 5u, i, 0u);
-    let t1 = load(nodes, lay, 5u, i, 1u);
-    let t2 = load(nodes, lay, 5u, i, 2u);
-    let t3 = load(nodes, lay, 5u, i, 3u);
-    let t4 = load(nodes, lay, 5u, i, 4u);
+    let s = slot(arena.node_layout, 5u, i);
+    let t0 = texel(nodes, s, 0u);
+    let t1 = texel(nodes, s, 1u);
+    let t2 = texel(nodes, s, 2u);
+    let t3 = texel(nodes, s, 3u);
+    let t4 = texel(nodes, s, 4u);
     var n: Node;
     n.c = t0.xyz;
     n.a0 = t1.xyz;
@@ -294,14 +298,16 @@ fn leaf_pair(p: u32, na: Node, nb: Node) {
     let lay = arena.tri_layout;
     for (var i = 0u; i < na.count; i++) {
         let ja = pose.base.y + na.first + i;
-        let a0 = load(tris, lay, 3u, ja, 0u);
-        let a1 = load(tris, lay, 3u, ja, 1u);
-        let a2 = load(tris, lay, 3u, ja, 2u);
+        let sa = slot(lay, 3u, ja);
+        let a0 = texel(tris, sa, 0u);
+        let a1 = texel(tris, sa, 1u);
+        let a2 = texel(tris, sa, 2u);
         for (var j = 0u; j < nb.count; j++) {
             let jb = pose.base.w + nb.first + j;
-            let b0 = load(tris, lay, 3u, jb, 0u);
-            let b1 = load(tris, lay, 3u, jb, 1u);
-            let b2 = load(tris, lay, 3u, jb, 2u);
+            let sb = slot(lay, 3u, jb);
+            let b0 = texel(tris, sb, 0u);
+            let b1 = texel(tris, sb, 1u);
+            let b2 = texel(tris, sb, 2u);
             let r = tri_tri(a0.xyz, a1.xyz, a2.xyz, b0.xyz, b1.xyz, b2.xyz);
             if r != TRI_DISJOINT {
                 emit(p, u32(a0.w), u32(b0.w), r == TRI_UNCERTAIN);

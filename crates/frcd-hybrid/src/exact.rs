@@ -5,7 +5,7 @@ use crate::report::Via;
 use crate::state::{Outcome, PairState};
 use crate::{Checker, Contact};
 use frcd_geom::{Pose, Triangle};
-use frcd_obb::{ObbTree, PairCache, RelativeFrame, Request, collide, collide_cached};
+use frcd_obb::{ObbTree, PairCache, RelativeFrame, Request, collide_cached};
 use std::time::Instant;
 
 impl Checker {
@@ -54,8 +54,9 @@ impl Checker {
             },
             Plan::Cpu => self.cpu_query(ta, pa, tb, pb, &mut job.state.cache),
             Plan::GpuDone(pairs) => {
+                // The GPU proved no surface pair touches: only containment is left to find.
                 let contained = if pairs.is_empty() && self.options.solid {
-                    collide(ta, pa, tb, pb, &self.request(frcd_obb::Mode::FirstContact)).contained
+                    frcd_obb::containment(ta, pa, tb, pb)
                 } else {
                     None
                 };

@@ -1,45 +1,70 @@
 //! Pipelined checking: the GPU traverses frame k+1 while the CPU finishes frame k.
 //!
 //! [`Checker::check_pipelined`] takes frame k+1's poses and returns frame k's answer (one frame
-//! of latency). Per call: frame k+1's overlapping body pairs are found on a look-ahead CPU broad
-//! phase and its GPU body pairs are **submitted** (one batch, one submission); then frame k's
-//! batch, submitted one call earlier, is read back and its touching pairs re-decided exactly on
-//! the CPU, and frame k runs through [`Checker::check`] with those answers (CPU pairs, solid
-//! mode, segments, clearance) while the GPU works on frame k+1. The answers equal
-//! [`Checker::check`]'s frame for frame: the same stages run on the same poses; the GPU pairs
-//! are only computed earlier.
+//! of latency). Per call: frame k+1's rough colliding set is computed (the broad phase, on the
+//! backend [`Checker::check`] would use) and its GPU body pairs are **submitted** (one batch,
+//! one submission); then frame k's batch, submitted one call earlier, is read back and its
+//! touching pairs re-decided exactly on the CPU, and frame k runs through [`Checker::check`]
+//! with its rough colliding set and GPU answers already in hand (CPU pairs, solid mode,
+//! segments, clearance) while the GPU works on frame k+1. The broad phase runs once per frame.
+//! The answers equal [`Checker::check`]'s frame for frame: the same stages run on the same
+//! poses; the broad phase and the GPU pairs are only computed earlier.
 
 use crate::{Checker, FrameResult, FrameState, HybridError};
 use frcd_geom::Pose;
 #[cfg(feature = "gpgpu")]
 use std::collections::{HashMap, HashSet};
 
-/// GPU pair answers read before their frame runs: used by the frame's pair stage
-/// (`Checker::gpu_pair_queries`) when its poses are these.
+/// Work done for a frame before it runs: its rough colliding set and its GPU pair answers,
+/// used by [`Checker::check`] (`Checker::rcs_ahead`, `Checker::gpu_pair_queries`) when its
+/// poses are these.
 #[cfg(feature = "gpgpu")]
 #[derive(Debug)]
 pub(crate) struct GpuAnswers {
     pub(crate) poses: Vec<Pose>,
     pub(crate) pairs: HashMap<(u32, u32), Vec<(u32, u32)>>,
+    /// The frame's rough colliding set (taken by the broad phase stage).
+    pub(crate) rcs: Option<RcsAhead>,
+}
+
+/// A frame's rough colliding set computed ahead of the frame.
+#[cfg(feature = "gpgpu")]
+pub(crate) struct RcsAhead {
+    candidates: Vec<crate::rcs::Candidate>,
+    backend: crate::StageBackend,
+    time_us: f64,
+    /// Notes the broad phase left (a GPU box pass that fell back to the CPU).
+    notes: Vec<String>,
+}
+
+#[cfg(feature = "gpgpu")]
+impl std::fmt::Debug for RcsAhead {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RcsAhead")
+            .field("candidates", &self.candidates.len())
+            .field("backend", &self.backend)
+            .finish()
+    }
 }
 
 /// A submitted frame's poses and overlapping body pairs.
 #[cfg(feature = "gpgpu")]
 type PrevFrame = (Vec<Pose>, HashSet<(u32, u32)>);
 
-/// A frame's GPU batch, submitted and not yet read.
+/// A frame computed ahead: its rough colliding set and its GPU batch, submitted and not yet
+/// read (none when no pair goes to the GPU or the submission failed).
 #[cfg(feature = "gpgpu")]
 #[derive(Debug)]
 struct InFlight {
     poses: Vec<Pose>,
-    keys: Vec<(u32, u32)>,
-    batch: frcd_gpgpu::SubmittedBatch,
+    rcs: RcsAhead,
+    batch: Option<(Vec<(u32, u32)>, frcd_gpgpu::SubmittedBatch)>,
 }
 
-/// Caller-owned state of pipelined checking ([`Checker::check_pipelined`]): the frame state,
-/// a look-ahead broad phase, the frame held back (its poses) and its GPU batch in flight. One
-/// per checker; a pipeline used with one checker is refused by another
-/// ([`HybridError::ForeignState`]) until [`Pipeline::reset`].
+/// Caller-owned state of pipelined checking ([`Checker::check_pipelined`]): the frame state
+/// (its broad phase runs one frame ahead of the answers), the frame held back (its poses) and
+/// its GPU batch in flight. One per checker; a pipeline used with one checker is refused by
+/// another ([`HybridError::ForeignState`]) until [`Pipeline::reset`].
 ///
 /// ```no_run
 /// use frcd_hybrid::{BodySpec, Checker, Options, Pipeline};
@@ -63,9 +88,6 @@ pub struct Pipeline {
     owner: u64,
     /// The frame held back: its poses (checked at the next call).
     held: Option<Vec<Pose>>,
-    /// Broad phase of the frame being submitted (the state's World is one frame behind).
-    #[cfg(feature = "gpgpu")]
-    ahead: FrameState,
     #[cfg(feature = "gpgpu")]
     in_flight: Option<InFlight>,
     /// Scratch buffers of the batch not in flight.
@@ -167,9 +189,11 @@ impl Checker {
         Ok(())
     }
 
-    /// Frame `poses`: its rough colliding set on the look-ahead broad phase, and its GPU pairs
-    /// (those [`Checker::check`] will send to the GPU: overlapping, not reused, chosen by the
-    /// cost model) submitted as one batch. `None` when no GPU pair stage runs.
+    /// Frame `poses` ahead of its turn: its rough colliding set (on the pipeline's frame
+    /// state, whose broad phase thereby moves one frame ahead of the answers) and its GPU
+    /// pairs (those [`Checker::check`] will send to the GPU: overlapping, not reused, chosen by
+    /// the cost model) submitted as one batch. `None` when no GPU pair stage runs (then
+    /// [`Checker::check`] runs the frame's broad phase itself).
     #[cfg(feature = "gpgpu")]
     fn submit_ahead(
         &self,
@@ -183,29 +207,26 @@ impl Checker {
         else {
             return Ok(None);
         };
-        if pipe.ahead.world.is_none() || pipe.ahead.owner != self.serial {
-            self.bind(&mut pipe.ahead, poses)?;
+        if pipe.state.world.is_none() {
+            self.bind(&mut pipe.state, poses)?;
         }
-        // The look-ahead broad phase runs on the CPU World whatever the backend: the box pass
-        // on the GPU would be one more blocking readback per frame. Only pairs whose raw boxes
-        // overlap can go to the GPU pair stage; they are the World's pairs at margin 0
-        // (exclusions and static pairs already filtered).
-        let world = pipe.ahead.world.as_mut().expect("bound above");
-        pipe.ahead.updates.clear();
-        pipe.ahead
-            .updates
-            .extend(pipe.ahead.ids.iter().copied().zip(poses.iter().copied()));
-        world.set_poses(&pipe.ahead.updates)?;
-        let mut overlapping: Vec<(u32, u32)> = world
-            .overlapping_pairs(0.0)
-            .into_iter()
-            .filter(|&(a, b)| match (world.body_aabb(a), world.body_aabb(b)) {
-                (Some(ba), Some(bb)) => ba.intersects(&bb),
-                _ => false,
-            })
-            .map(|(a, b)| (a.index().min(b.index()), a.index().max(b.index())))
+        let t0 = std::time::Instant::now();
+        let mut notes = FrameResult::empty();
+        let (candidates, backend) = self.rough_colliding_set(poses, &mut pipe.state, &mut notes)?;
+        let rcs = RcsAhead {
+            candidates,
+            backend,
+            time_us: t0.elapsed().as_secs_f64() * 1e6,
+            notes: notes.notes,
+        };
+        // Only pairs whose raw boxes overlap run the collision query (the others are in the
+        // set for their clearance only).
+        let overlapping: Vec<(u32, u32)> = rcs
+            .candidates
+            .iter()
+            .filter(|c| c.overlap)
+            .map(|c| c.key)
             .collect();
-        overlapping.sort_unstable();
         // Check reuses a pair's last answer when the pair was a candidate of the previous frame
         // and both poses are unchanged (then its boxes overlapped then too: only overlapping
         // pairs need remembering).
@@ -222,8 +243,13 @@ impl Checker {
             .filter(|&k| !reused(k) && self.wants_gpu_narrow(k))
             .collect();
         pipe.prev = Some((poses.to_vec(), overlapping.into_iter().collect()));
+        let mut ahead = InFlight {
+            poses: poses.to_vec(),
+            rcs,
+            batch: None,
+        };
         if keys.is_empty() {
-            return Ok(None);
+            return Ok(Some(ahead));
         }
         let items: Vec<frcd_gpgpu::BodyPair<'_>> = keys
             .iter()
@@ -235,17 +261,14 @@ impl Checker {
             .collect();
         let scratch = pipe.spare.take().unwrap_or_default();
         match g.ctx.submit_batch(&items, scratch) {
-            Ok(batch) => Ok(Some(InFlight {
-                poses: poses.to_vec(),
-                keys,
-                batch,
-            })),
-            Err(e) => self.gpu_ahead_failed(e),
+            Ok(batch) => ahead.batch = Some((keys, batch)),
+            Err(e) => self.gpu_ahead_failed(e)?,
         }
+        Ok(Some(ahead))
     }
 
     /// Reads frame k's batch (waiting on its submission only; the GPU may be busy with frame
-    /// k+1) and leaves its answers for [`Checker::check`]'s pair stage.
+    /// k+1) and leaves its answers and rough colliding set for [`Checker::check`].
     #[cfg(feature = "gpgpu")]
     fn read_in_flight(
         &self,
@@ -256,28 +279,62 @@ impl Checker {
         let (Some(f), Some(g)) = (current, self.gpgpu.as_ref()) else {
             return Ok(());
         };
-        match g.ctx.resolve_batch(f.batch) {
-            Ok((batch, scratch)) => {
-                pipe.spare = Some(scratch);
-                pipe.state.gpu_answers = Some(crate::pipeline::GpuAnswers {
-                    poses: f.poses,
-                    pairs: f
-                        .keys
+        let mut answers = GpuAnswers {
+            poses: f.poses,
+            pairs: HashMap::new(),
+            rcs: Some(f.rcs),
+        };
+        if let Some((keys, batch)) = f.batch {
+            match g.ctx.resolve_batch(batch) {
+                Ok((batch, scratch)) => {
+                    pipe.spare = Some(scratch);
+                    answers.pairs = keys
                         .into_iter()
                         .zip(batch.results.into_iter().map(|r| r.pairs))
-                        .collect(),
-                });
-                Ok(())
+                        .collect();
+                }
+                Err(e) => self.gpu_ahead_failed(e)?,
             }
-            Err(e) => self.gpu_ahead_failed(e).map(|_| ()),
         }
+        pipe.state.gpu_answers = Some(answers);
+        Ok(())
+    }
+
+    /// The rough colliding set a pipelined run computed ahead for these poses (its notes
+    /// added to `result`), as `(candidates, backend, microseconds)`; `None` otherwise.
+    #[cfg(feature = "gpgpu")]
+    pub(crate) fn rcs_ahead(
+        &self,
+        poses: &[Pose],
+        state: &mut FrameState,
+        result: &mut FrameResult,
+    ) -> Option<(Vec<crate::rcs::Candidate>, crate::StageBackend, f64)> {
+        let rcs = state
+            .gpu_answers
+            .as_mut()
+            .filter(|a| a.poses == poses)?
+            .rcs
+            .take()?;
+        result.notes.extend(rcs.notes);
+        Some((rcs.candidates, rcs.backend, rcs.time_us))
+    }
+
+    /// Without the `gpgpu` feature nothing is computed ahead.
+    #[cfg(not(feature = "gpgpu"))]
+    pub(crate) fn rcs_ahead(
+        &self,
+        _poses: &[Pose],
+        _state: &mut FrameState,
+        _result: &mut FrameResult,
+    ) -> Option<(Vec<crate::rcs::Candidate>, crate::StageBackend, f64)> {
+        None
     }
 
     /// A GPU failure ahead of the frame: an error under [`crate::GpuPolicy::Require`];
     /// otherwise the frame's own pair stage runs as in [`Checker::check`] (and reports its
     /// fallback there).
     #[cfg(feature = "gpgpu")]
-    fn gpu_ahead_failed(&self, e: frcd_gpgpu::GpuError) -> Result<Option<InFlight>, HybridError> {
+    fn gpu_ahead_failed(&self, e: frcd_gpgpu::GpuError) -> Result<(), HybridError> {
         if self.options.gpu == crate::GpuPolicy::Require {
             return Err(HybridError::Gpu {
                 stage: "pair query",
@@ -285,6 +342,6 @@ impl Checker {
             });
         }
         log::warn!("GPU pair batch ahead of its frame failed: {e}");
-        Ok(None)
+        Ok(())
     }
 }

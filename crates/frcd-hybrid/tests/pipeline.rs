@@ -150,8 +150,8 @@ fn pipelined_equals_plain_on_the_gpu() {
     assert!(plain.has_gpgpu() && piped.has_gpgpu());
     assert!(touching >= 5, "{touching}");
     // The same submissions in both modes: per frame the box pass (Backend::Gpgpu) and one pair
-    // batch, the pipelined one submitted ahead of its frame and none re-submitted (the
-    // look-ahead broad phase runs on the CPU).
+    // batch, both submitted ahead of their frame in the pipelined mode (its broad phase runs
+    // once per frame, in the look-ahead) and none re-submitted.
     let frames = scene().2.len() as u64;
     assert!(
         plain.gpu_submissions() >= frames,

@@ -39,7 +39,7 @@ pub use frcd_geom::fit::FitMethod;
 pub use frcd_tritri::{Contact, Method};
 pub use query::{
     Collision, Containment, Counters, Mode, PairCache, RelativeFrame, Request, TopVolume, collide,
-    collide_cached,
+    collide_cached, containment,
 };
 #[cfg(feature = "serde")]
 pub use saved::{LoadError, SavedTree};

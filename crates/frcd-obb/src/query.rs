@@ -542,6 +542,32 @@ pub(crate) fn contained(
     None
 }
 
+/// Solid-mode containment alone, for two closed meshes whose surfaces are known not to touch
+/// (e.g. a GPU traversal found no touching triangle pair): the [`Collision::contained`] that
+/// [`collide`] reports in solid mode when no pair touches, without the traversal that proves
+/// it. Meaningless when the surfaces touch.
+///
+/// ```
+/// use frcd_obb::{collide, containment, BuildOptions, Containment, ObbTree, Request};
+/// use frcd_geom::{shapes, DVec3, Pose};
+/// let big = ObbTree::build(&shapes::icosphere(1.0, 2), &BuildOptions::default());
+/// let small = ObbTree::build(&shapes::icosphere(0.2, 1), &BuildOptions::default());
+/// let (inside, apart) = (Pose::IDENTITY, Pose::from_translation(DVec3::X * 3.0));
+/// let c = containment(&big, &Pose::IDENTITY, &small, &inside);
+/// assert_eq!(c, Some(Containment::BInsideA));
+/// let solid = Request { solid: true, ..Request::default() };
+/// assert_eq!(c, collide(&big, &Pose::IDENTITY, &small, &inside, &solid).contained);
+/// assert_eq!(containment(&big, &Pose::IDENTITY, &small, &apart), None);
+/// ```
+pub fn containment(a: &ObbTree, pose_a: &Pose, b: &ObbTree, pose_b: &Pose) -> Option<Containment> {
+    let mut ctx = Ctx::new(a, pose_a, b, pose_b, Request::default().method);
+    // Apart top volumes: neither can hold the other (as in `collide`).
+    if ctx.top_rejects(TopVolume::Hybrid) {
+        return None;
+    }
+    ctx.containment(true)
+}
+
 fn finish(ctx: &Ctx<'_>, request: &Request, mut c: Collision) -> Collision {
     if request.mode == Mode::AllPairs {
         c.pairs.sort_unstable();
