@@ -20,7 +20,9 @@
 //! setups only: it is two to three orders of magnitude slower), with their agreement and
 //! frcd's median work (volume pairs, triangle pairs). frcd's time per setup is the fastest of
 //! 7 windows of 1 ms (the machine is shared; preempted windows are dropped), the median over
-//! setups is printed. `FRCD_DISTANCE_NO_PARRY=1` times parry on one setup only,
+//! setups is printed. `FRCD_DISTANCE_NO_PARRY=1` times parry on one setup only (`=0`: not at
+//! all), `FRCD_DISTANCE_ONLY=SUBSTRING` times only the rows whose `pair/kind` contains it,
+//! `FRCD_DISTANCE_SPIN=SECONDS` keeps querying each timed row that long (for a profiler),
 //! `FRCD_DISTANCE_DETAIL=1` prints every setup's time and work. When
 //! `FRCD_DISTANCE_EXPORT=DIR` is set, every pair's meshes and poses are written there as plain
 //! text, so a peer library run outside this repository can time the same queries.
@@ -204,7 +206,7 @@ fn pairs() -> Vec<Pair> {
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 /// Median over the setups of the seconds per call of `f`: each setup is timed in 7 windows of
@@ -268,16 +270,36 @@ fn bench(c: &mut Criterion) {
         "pair/kind", "tris A", "tris B", "frcd med", "parry med", "parry/frcd", "max |diff|"
     );
     let req = DistanceRequest::default();
+    // `FRCD_DISTANCE_ONLY=SUBSTRING`: time only the rows whose label contains it (profiling).
+    let only = std::env::var("FRCD_DISTANCE_ONLY").ok();
     for p in &all {
         if let Some(Err(e)) = export_dir.as_ref().map(|dir| export(p, dir)) {
             println!("export {}: {e}", p.name);
         }
         for (k, kind) in KINDS.iter().enumerate() {
+            if only
+                .as_ref()
+                .is_some_and(|o| !format!("{}/{kind}", p.name).contains(o.as_str()))
+            {
+                continue;
+            }
             let poses = &p.poses[k];
             let [ta, tb] = &p.trees;
             let frcd_t = time_each(poses.len(), |i| {
                 black_box(distance(ta, &poses[i].0, tb, &poses[i].1, &req));
             });
+            if let Some(secs) = std::env::var("FRCD_DISTANCE_SPIN")
+                .ok()
+                .and_then(|v| v.parse::<f64>().ok())
+            {
+                // Profiling: keep querying this row's setups for `secs` seconds.
+                let t = Instant::now();
+                while t.elapsed().as_secs_f64() < secs {
+                    for (pa, pb) in poses {
+                        black_box(distance(ta, pa, tb, pb, &req));
+                    }
+                }
+            }
             let work = |f: fn(&frcd_obb::distance::DistanceCounters) -> u64| {
                 median(
                     poses
@@ -305,8 +327,9 @@ fn bench(c: &mut Criterion) {
             let mut diff = 0.0f64;
             let mut supported = true;
             let mut parry_times = Vec::new();
-            let parry_setups = if std::env::var_os("FRCD_DISTANCE_NO_PARRY").is_some() {
-                1
+            let parry_setups = if let Some(v) = std::env::var_os("FRCD_DISTANCE_NO_PARRY") {
+                // `=0`: no parry call at all (profiling).
+                if v == "0" { 0 } else { 1 }
             } else {
                 PARRY_SETUPS
             };

@@ -55,16 +55,23 @@
 //!    small angle `φ` by `1/φ` (the common perpendicular's feet); near-parallel edges are also
 //!    caught by the endpoint candidates, so the loss is at most `~sqrt(ε) L` in the worst case.
 //!    CAD meshes rarely put the closest pair there, and [`within`] is exact in every case.
-//! 4. *Early end (support certificate).* When the best pair improves, with `n` its unit
-//!    direction, `L = min_B n · y - max_A n · x` over the meshes' vertices (found by branch and
-//!    bound on the volumes) bounds the distance from below; less `32 ε M` for the rounding of
-//!    the dot products, of `n`'s length and of B's mapping, it is certified. The search stops
-//!    when `best <= L + 48 ε M`, so then `d* - 13 ε M <= d <= d* + 48 ε M` whatever the
-//!    conditioning. This ends most searches between parts apart, whose closest points usually
-//!    lie on both convex hulls (then `L` equals the distance).
+//! 4. *Early end (support certificate).* When the best pair `(pa, pb)` improves, with `n` its
+//!    unit direction, `L = min_B n · y - max_A n · x` over the meshes' vertices bounds the
+//!    distance from below, and `L <= n · (pb - pa) = best`. A depth-first search on the
+//!    volumes decides whether any vertex of A lies above `n · pa + τ` or any of B below
+//!    `n · pb - τ` (`τ = 16 ε M`), stopping at the first one; when none does, `L >= best - 2τ`
+//!    less `16 ε M` of rounding (dot products, `n`'s length, B's mapping), so
+//!    `d* - 13 ε M <= d <= d* + 48 ε M` whatever the conditioning, and the search stops. This
+//!    ends most searches between parts apart, whose closest points usually lie on both convex
+//!    hulls.
+//! 5. *Early exit of the leaf test.* A triangle pair's candidate is accepted before the other
+//!    candidates are computed when the slab between its two points separates the triangles
+//!    (every vertex at most `4 ε M` past its plane): nothing of the pair is closer by more than
+//!    `8 ε M` plus the rounding of those dot products, inside the bound above.
 //!
 //! With `rel_err`, `abs_err > 0` a node pair is also skipped when its lower bound `lb` gives
-//! `lb (1 + rel_err) >= best` or `lb + abs_err >= best` (PQP's rule), so
+//! `lb (1 + rel_err) >= best` or `lb + abs_err >= best` (PQP's rule), and the certificate's
+//! `τ` grows by half of `max(abs_err, rel_err · best / (1 + rel_err))`, so
 //! `d* - error_bound <= d <= d* (1 + rel_err) + abs_err + error_bound`.
 
 #[path = "distance_exact.rs"]
@@ -236,7 +243,7 @@ fn run_distance(
     if let Some((ta, tb)) = seed {
         if (ta as usize) < a.triangles().len() && (tb as usize) < b.triangles().len() {
             q.counters.tri_tests += 1;
-            let (d, pa, pb) = triangle_distance(&a.triangle(ta).v, &q.b_triangle(tb));
+            let (d, pa, pb) = triangle_distance(&a.triangle(ta).v, &q.b_triangle(tb), q.tri_tol);
             if d < best.d {
                 best = Best {
                     d,
@@ -351,6 +358,9 @@ struct Query<'a> {
     frame: RelativeFrame,
     /// Certified slack subtracted from every box lower bound.
     slack: f64,
+    /// How far a vertex may lie past a triangle pair's separating slab in the leaf test's
+    /// early exit (`tri::triangle_features_early`): `4 ε M`.
+    tri_tol: f64,
     magnitude: f64,
     /// Unit direction between the best closest points so far (A's frame).
     dir: Option<DVec3>,
@@ -362,18 +372,22 @@ struct Query<'a> {
     /// Certificate attempts left in this query.
     certify_left: u32,
     /// Scratch stack of the support searches.
-    support_stack: Vec<(u32, f64)>,
+    support_stack: Vec<u32>,
+    /// The last vertices (local frames) that failed the certificate, tried first next time.
+    violator_a: Option<DVec3>,
+    violator_b: Option<DVec3>,
+    /// Search B's side first in the next certificate (it failed last).
+    b_first: bool,
     /// The caller's error allowances (for the certificate).
     rel: f64,
     abs: f64,
     counters: DistanceCounters,
 }
 
-/// Rounding allowance of the support certificate's lower bound (see `Query::certify`).
-const CERT_SLACK: f64 = 32.0 * f64::EPSILON * 0.5;
-/// How far above the certificate's (slackened) bound an answer may be accepted: the answer is
-/// then within `48 ε M` above the true distance, inside the documented `64 ε M`.
-const CERT_STOP: f64 = 48.0 * f64::EPSILON * 0.5;
+/// How far past the best pair's projection a vertex may lie in the support certificate, per
+/// side (`16 ε`, times `M`): the answer is then within `48 ε M` above the true distance,
+/// inside the documented `64 ε M` (see `Query::certify`).
+const CERT_TAU: f64 = 16.0 * f64::EPSILON * 0.5;
 
 /// Support certificates tried per query, and the nodes each support search may visit: they
 /// bound what a query that cannot be certified (closest points in a concavity, or a face
@@ -381,6 +395,8 @@ const CERT_STOP: f64 = 48.0 * f64::EPSILON * 0.5;
 const CERTIFY_TRIES: u32 = 64;
 const SUPPORT_BUDGET: u32 = 4096;
 
+/// Slab allowance of the leaf test's early exit, times `M`: `4 ε` (module docs, step 3).
+const TRI_TOL: f64 = 4.0 * f64::EPSILON * 0.5;
 /// Relative slack of the box lower bounds (see the module docs, step 2).
 const SLACK_REL: f64 = 1e-13;
 /// Bound factor of the returned distance: `64 ε`.
@@ -414,6 +430,7 @@ impl<'a> Query<'a> {
             vb: b.distance_volumes(),
             frame,
             slack: SLACK_REL * magnitude,
+            tri_tol: TRI_TOL * magnitude,
             magnitude,
             dir: None,
             dir_b: DVec3::ZERO,
@@ -421,6 +438,9 @@ impl<'a> Query<'a> {
             proven: false,
             certify_left: CERTIFY_TRIES,
             support_stack: Vec::new(),
+            violator_a: None,
+            violator_b: None,
+            b_first: false,
             rel: 0.0,
             abs: 0.0,
             counters: DistanceCounters::default(),
@@ -499,6 +519,15 @@ impl<'a> Query<'a> {
         // The pair to expand next when it is no farther than the heap's top: the nearer child
         // of the pair just expanded usually is, and skips a push and a pop.
         let mut next = Some(Entry { lb, a: ra, b: rb });
+        // Dives: the nearer child pair is expanded next even when the heap holds a nearer
+        // pair, down to a leaf pair, so the first triangle pair (an upper bound and a direction
+        // for the certificate and the bounds along it) comes after a few dozen volume pairs
+        // instead of after the whole frontier below it. The first descent always dives; when
+        // the root volumes are apart, every descent does (best-first by dives: at range the
+        // bounds of many pairs are nearly equal, and a dive reaches the pair the certificate
+        // accepts sooner), otherwise the search is best-first after the first leaf pair.
+        let dive_always = lb > 0.0;
+        let mut dive = true;
         while let Some(Entry { lb, a: na, b: nb }) = next.take().or_else(|| heap.pop()) {
             if prune(lb, best.d) {
                 // Every other entry has a larger bound.
@@ -509,6 +538,7 @@ impl<'a> Query<'a> {
                 self.vb[nb as usize].is_leaf(),
             );
             if leaf_a && leaf_b {
+                dive = dive_always;
                 // A positive certified bound: the triangles cannot touch, skip the exact test.
                 self.leaf_pair(na, nb, best, lb > 0.0);
                 if best.d == 0.0 || self.proven {
@@ -543,7 +573,7 @@ impl<'a> Query<'a> {
                 if prune(x.lb, best.d) {
                     break; // sorted: the other is farther still
                 }
-                if k == 0 && heap.peek().is_none_or(|t| x.lb <= t.lb) {
+                if k == 0 && (dive || heap.peek().is_none_or(|t| x.lb <= t.lb)) {
                     next = Some(x);
                 } else {
                     heap.push(x);
@@ -552,14 +582,20 @@ impl<'a> Query<'a> {
         }
     }
 
-    /// Support certificate: with `n` the best pair's direction, every point of A projects on
-    /// `n` at most `max_A n · x` and every point of B at least `min_B n · y`, so their
-    /// difference `L` bounds the distance from below (the meshes' convex hulls are that far
-    /// apart along `n`). When the best pair lies on both hulls facing each other (the usual
-    /// case for parts apart), `L` equals its distance and the search can stop: nothing is
-    /// closer. Rounding: the dot products of vertices (`|x| <= M`), the unit length of `n` and
-    /// B's mapping each add a few `ε M`; `CERT_SLACK` covers them, and the stop rule allows the
-    /// answer to exceed `L` by `CERT_STOP` (both inside the documented `64 ε M`).
+    /// Support certificate: with `n` the best pair's direction and `pa`, `pb` its points, every
+    /// point of A projects on `n` at most `max_A n · x` and every point of B at least
+    /// `min_B n · y`, so `L = min_B n · y - max_A n · x` bounds the distance from below (the
+    /// meshes' convex hulls are that far apart along `n`), and `L <= n · (pb - pa) = best`.
+    /// The certificate is a decision: no vertex of A above `n · pa + τ` and none of B below
+    /// `n · pb - τ` ([`rss::support_below`], which stops at the first vertex past its limit, so
+    /// a failing try is cheap, and skips whole faces that tie the limit). Then `L >= best - 2τ`
+    /// less rounding, and nothing is closer than the answer by more than the allowance: this
+    /// happens when the best pair lies on both hulls facing each other (the usual case for
+    /// parts apart). Rounding: the dot products of vertices and of the volumes' support bounds
+    /// (`|x| <= M`), the unit length of `n`, `n · (pb - pa)` against `best` and B's mapping
+    /// add at most `16 ε M`; with `τ = CERT_TAU = 16 ε M` the answer is then within `48 ε M`
+    /// above the true distance (inside the documented `64 ε M`). With `rel_err` / `abs_err`,
+    /// `τ` grows by half of what they allow.
     fn certify(&mut self, best: &Best) -> bool {
         let Some(n) = self.dir else {
             return false;
@@ -569,32 +605,50 @@ impl<'a> Query<'a> {
         }
         self.certify_left -= 1;
         self.counters.box_tests += 1;
-        // No slack in the support searches: the rounding of a skipped node's bound (a few
-        // `ε M`) is part of `CERT_SLACK`.
-        let slack = 0.0;
-        let sa = rss::support(
-            self.va,
-            self.a,
-            self.a.root_node(),
-            n,
-            slack,
-            SUPPORT_BUDGET,
-            &mut self.support_stack,
-        );
-        let sb = rss::support(
-            self.vb,
-            self.b,
-            self.b.root_node(),
-            -self.dir_b,
-            slack,
-            SUPPORT_BUDGET,
-            &mut self.support_stack,
-        );
-        // min over B of n · y = dir_t - max over B of (-dir_b) · y.
-        let l = (self.dir_t - sb) - sa - CERT_SLACK * self.magnitude;
-        let proven = l + CERT_STOP * self.magnitude >= best.d
-            || l * (1.0 + self.rel) >= best.d
-            || l + self.abs >= best.d;
+        let allow = self.abs.max(self.rel * best.d / (1.0 + self.rel)) * (0.5 * 0.999);
+        let tau = CERT_TAU * self.magnitude + allow;
+        let lim_a = n.dot(best.pa) + tau;
+        // For B: -n · (m y + t) <= -(n · pb - τ), i.e. (-dir_b) · y <= dir_t - n · pb + τ.
+        let lim_b = self.dir_t - n.dot(best.pb) + tau;
+        let nb = -self.dir_b;
+        // The vertices that failed last time first (O(1)): in a concavity they keep failing.
+        if self.violator_a.is_some_and(|p| !(n.dot(p) <= lim_a))
+            || self.violator_b.is_some_and(|p| !(nb.dot(p) <= lim_b))
+        {
+            return false;
+        }
+        let side = |on_b: bool, q: &mut Self| {
+            if on_b {
+                rss::support_below(
+                    q.vb,
+                    q.b,
+                    q.b.root_node(),
+                    nb,
+                    lim_b,
+                    SUPPORT_BUDGET,
+                    &mut q.support_stack,
+                    &mut q.violator_b,
+                )
+            } else {
+                rss::support_below(
+                    q.va,
+                    q.a,
+                    q.a.root_node(),
+                    n,
+                    lim_a,
+                    SUPPORT_BUDGET,
+                    &mut q.support_stack,
+                    &mut q.violator_a,
+                )
+            }
+        };
+        // The side that failed last time first: a passing side walks its whole cap, a failing
+        // one stops at its first vertex.
+        let first = self.b_first;
+        let proven = side(first, self) && side(!first, self);
+        if !proven {
+            self.b_first = self.violator_b.is_some() && (first || self.violator_a.is_none());
+        }
         self.proven |= proven;
         proven
     }
@@ -637,10 +691,10 @@ impl<'a> Query<'a> {
                 let vb = *vb.get_or_insert_with(|| self.frame.triangle(&self.b.triangle(tb)).v);
                 self.counters.tri_tests += 1;
                 let (d, pa, pb) = if apart {
-                    let (d2, pa, pb) = tri::triangle_features(&va, &vb);
+                    let (d2, pa, pb) = tri::triangle_features_early(&va, &vb, self.tri_tol);
                     (d2.sqrt(), pa, pb)
                 } else {
-                    triangle_distance(&va, &vb)
+                    triangle_distance(&va, &vb, self.tri_tol)
                 };
                 if d < best.d {
                     *best = Best {

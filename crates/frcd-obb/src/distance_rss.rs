@@ -114,57 +114,75 @@ pub(crate) fn gap_along(a: &Rss, b: &Placed, n: DVec3) -> f64 {
     n.dot(b.c - a.c).abs() - a.extent(n) - b.extent(n) - a.r - b.r
 }
 
-/// The largest `n · x` over the vertices under `root` (computed dot products of actual
-/// vertices; every vertex not visited has an exact dot product at most the result plus
-/// `slack`): branch and bound on the volumes' support `n · c + a|n · u| + b|n · v| + r`.
-/// `+∞` (no bound) when more than `budget` nodes would be visited: a face perpendicular to
-/// `n` ties every vertex on it, and the certificate is not worth that walk.
-pub(crate) fn support(
+/// True when no vertex under `root` has a computed `n · x` above `limit`: a depth-first
+/// branch and bound on the volumes' support `n · c + a|n · u| + b|n · v| + r`, which skips
+/// every node whose computed support is at most `limit` (the rounding of that bound, a few
+/// `ε M`, is part of the caller's allowance) and stops at the first vertex above it, so a
+/// failing certificate costs little. False also when more than `budget` nodes would be
+/// visited. Nodes whose support ties the limit (a face square to `n`) are skipped whole, which
+/// is what makes the certificate cheap on flat faces. `found` receives the first vertex above
+/// the limit (the caller tries it first next time: in a concavity the same far vertex keeps
+/// failing the certificate).
+pub(crate) fn support_below(
     nodes: &[DNode],
     tree: &ObbTree,
     root: u32,
     n: DVec3,
-    slack: f64,
+    limit: f64,
     budget: u32,
-    stack: &mut Vec<(u32, f64)>,
-) -> f64 {
+    stack: &mut Vec<u32>,
+    found: &mut Option<DVec3>,
+) -> bool {
+    if let Some(p) = *found {
+        if !(n.dot(p) <= limit) {
+            return false;
+        }
+    }
     let ub = |id: u32| {
         let v = &nodes[id as usize].rss;
         n.dot(v.c) + v.extent(n) + v.r
     };
-    let mut best = f64::NEG_INFINITY;
+    // NaN limits and bounds decide nothing: `!(x <= limit)` treats them as above.
+    if ub(root) <= limit {
+        return true;
+    }
     stack.clear();
-    stack.push((root, f64::INFINITY));
+    stack.push(root);
     let mut visits = 0u32;
-    while let Some((id, bound)) = stack.pop() {
-        if bound + slack <= best {
-            continue;
-        }
+    while let Some(id) = stack.pop() {
         visits += 1;
         if visits > budget {
-            return f64::INFINITY;
+            return false;
         }
         let d = &nodes[id as usize];
         if d.is_leaf() {
             for &t in tree.node_triangles(id) {
                 for p in tree.triangle(t).v {
-                    best = best.max(n.dot(p));
+                    if !(n.dot(p) <= limit) {
+                        *found = Some(p);
+                        return false;
+                    }
                 }
             }
             continue;
         }
         let [k0, k1] = d.kids;
         let (u0, u1) = (ub(k0), ub(k1));
-        // The child with the larger bound is visited first (pushed last).
-        if u0 >= u1 {
-            stack.push((k1, u1));
-            stack.push((k0, u0));
+        // The child with the larger bound (the likelier to hold a vertex above the limit) is
+        // visited first: pushed last.
+        let (first, second) = if u0 >= u1 {
+            ((k0, u0), (k1, u1))
         } else {
-            stack.push((k0, u0));
-            stack.push((k1, u1));
+            ((k1, u1), (k0, u0))
+        };
+        if !(second.1 <= limit) {
+            stack.push(second.0);
+        }
+        if !(first.1 <= limit) {
+            stack.push(first.0);
         }
     }
-    best
+    true
 }
 
 /// Builds one volume per node, indexed by node id.
