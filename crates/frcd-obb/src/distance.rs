@@ -316,6 +316,12 @@ pub fn within_counted(
     (r, q.counters)
 }
 
+#[allow(dead_code)]
+pub(crate) fn ab() -> bool {
+    static AB: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *AB.get_or_init(|| std::env::var_os("FRCD_AB").is_none())
+}
+
 /// The best pair found so far (A's frame).
 struct Best {
     d: f64,
@@ -477,6 +483,46 @@ impl<'a> Query<'a> {
         g.max(r - self.slack)
     }
 
+    /// [`Self::lower_bound`] for B's node `nb`, placed only when the bound along the best
+    /// pair's direction does not already reach `enough`: that bound reads B's volume in its
+    /// own frame (`dir_b`, `dir_t`: the direction mapped back; their rounding, a few `ε M`, is
+    /// inside the slack), so a pair it prunes costs no mapping. `placed` caches the placement
+    /// for the caller's next pair with the same `nb`.
+    #[inline]
+    fn lower_bound_lazy(
+        &mut self,
+        na: u32,
+        nb: u32,
+        placed: &mut Option<rss::Placed>,
+        enough: f64,
+    ) -> f64 {
+        if let Some(n) = self.dir {
+            if placed.is_none() {
+                self.counters.box_tests += 1;
+                let va = &self.va[na as usize].rss;
+                let vb = &self.vb[nb as usize].rss;
+                let (db, dt) = (self.dir_b, self.dir_t);
+                let cb = db.dot(vb.c) + dt;
+                let eb = vb.a * db.dot(vb.u).abs() + vb.b * db.dot(vb.v).abs();
+                let g = (cb - n.dot(va.c)).abs()
+                    - va.a * n.dot(va.u).abs()
+                    - va.b * n.dot(va.v).abs()
+                    - eb
+                    - va.r
+                    - vb.r
+                    - self.slack;
+                if g >= enough {
+                    return g;
+                }
+                let pb = *placed.insert(self.place(nb));
+                let (r, _) = rss::lower_bound(&self.va[na as usize].rss, &pb);
+                return g.max(r - self.slack);
+            }
+        }
+        let pb = *placed.get_or_insert_with(|| self.place(nb));
+        self.lower_bound(na, &pb, enough)
+    }
+
     /// Children of A's node (none for a leaf).
     #[inline(always)]
     fn kids_a(&self, n: u32) -> impl Iterator<Item = u32> {
@@ -554,15 +600,14 @@ impl<'a> Query<'a> {
                 b: 0,
             }; 2];
             if split_a {
-                let pb = self.place(nb);
+                let mut pb = None;
                 for (k, ca) in self.va[na as usize].kids.into_iter().enumerate() {
-                    let lb = self.lower_bound(ca, &pb, enough(best.d));
+                    let lb = self.lower_bound_lazy(ca, nb, &mut pb, enough(best.d));
                     e[k] = Entry { lb, a: ca, b: nb };
                 }
             } else {
                 for (k, cb) in self.vb[nb as usize].kids.into_iter().enumerate() {
-                    let pb = self.place(cb);
-                    let lb = self.lower_bound(na, &pb, enough(best.d));
+                    let lb = self.lower_bound_lazy(na, cb, &mut None, enough(best.d));
                     e[k] = Entry { lb, a: na, b: cb };
                 }
             }
@@ -669,23 +714,23 @@ impl<'a> Query<'a> {
             let mut vb: Option<[DVec3; 3]> = None;
             for &ta in self.a.node_triangles(na) {
                 let va = self.a.triangle(ta).v;
-                if apart {
-                    // Leaf short-cut: the triangles' separation along the best direction so far
-                    // (a certified lower bound up to the slack) often already prunes at range.
-                    // B's triangle is projected in its own frame (`dir_b`, `dir_t`: the
-                    // direction mapped back), so a pruned pair costs no mapping.
-                    if let Some(n) = self.dir {
-                        let (a0, a1, a2) = (n.dot(va[0]), n.dot(va[1]), n.dot(va[2]));
-                        let (b0, b1, b2) = (
-                            self.dir_b.dot(lb_tri[0]) + self.dir_t,
-                            self.dir_b.dot(lb_tri[1]) + self.dir_t,
-                            self.dir_b.dot(lb_tri[2]) + self.dir_t,
-                        );
-                        let (alo, ahi) = (a0.min(a1).min(a2), a0.max(a1).max(a2));
-                        let (blo, bhi) = (b0.min(b1).min(b2), b0.max(b1).max(b2));
-                        if (blo - ahi).max(alo - bhi) - self.slack >= best.d {
-                            continue;
-                        }
+                // Leaf short-cut: the triangles' separation along the best direction so far
+                // (a certified lower bound up to the slack) often already prunes at range.
+                // It also holds for volumes that may overlap: triangles that far apart
+                // along `n` are disjoint, so their exact test is skipped too.
+                // B's triangle is projected in its own frame (`dir_b`, `dir_t`: the
+                // direction mapped back), so a pruned pair costs no mapping.
+                if let Some(n) = self.dir {
+                    let (a0, a1, a2) = (n.dot(va[0]), n.dot(va[1]), n.dot(va[2]));
+                    let (b0, b1, b2) = (
+                        self.dir_b.dot(lb_tri[0]) + self.dir_t,
+                        self.dir_b.dot(lb_tri[1]) + self.dir_t,
+                        self.dir_b.dot(lb_tri[2]) + self.dir_t,
+                    );
+                    let (alo, ahi) = (a0.min(a1).min(a2), a0.max(a1).max(a2));
+                    let (blo, bhi) = (b0.min(b1).min(b2), b0.max(b1).max(b2));
+                    if (blo - ahi).max(alo - bhi) - self.slack >= best.d {
+                        continue;
                     }
                 }
                 let vb = *vb.get_or_insert_with(|| self.frame.triangle(&self.b.triangle(tb)).v);
