@@ -364,6 +364,9 @@ struct Query<'a> {
     frame: RelativeFrame,
     /// Certified slack subtracted from every box lower bound.
     slack: f64,
+    /// One more alternating projection in the volumes' lower bound (near contact, where the
+    /// bound's direction matters; at range the cheaper bound is as good).
+    refine: bool,
     /// How far a vertex may lie past a triangle pair's separating slab in the leaf test's
     /// early exit (`tri::triangle_features_early`): `4 ε M`.
     tri_tol: f64,
@@ -437,6 +440,7 @@ impl<'a> Query<'a> {
             frame,
             slack: SLACK_REL * magnitude,
             tri_tol: TRI_TOL * magnitude,
+            refine: true,
             magnitude,
             dir: None,
             dir_b: DVec3::ZERO,
@@ -479,7 +483,7 @@ impl<'a> Query<'a> {
                 return g;
             }
         }
-        let (r, _) = rss::lower_bound(va, pb);
+        let r = rss::lower_bound(va, pb, self.refine, enough + self.slack);
         g.max(r - self.slack)
     }
 
@@ -515,7 +519,12 @@ impl<'a> Query<'a> {
                     return g;
                 }
                 let pb = *placed.insert(self.place(nb));
-                let (r, _) = rss::lower_bound(&self.va[na as usize].rss, &pb);
+                let r = rss::lower_bound(
+                    &self.va[na as usize].rss,
+                    &pb,
+                    self.refine,
+                    enough + self.slack,
+                );
                 return g.max(r - self.slack);
             }
         }
@@ -573,6 +582,7 @@ impl<'a> Query<'a> {
         // bounds of many pairs are nearly equal, and a dive reaches the pair the certificate
         // accepts sooner), otherwise the search is best-first after the first leaf pair.
         let dive_always = lb > 0.0;
+        self.refine = !dive_always;
         let mut dive = true;
         while let Some(Entry { lb, a: na, b: nb }) = next.take().or_else(|| heap.pop()) {
             if prune(lb, best.d) {
