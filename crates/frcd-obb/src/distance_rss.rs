@@ -131,8 +131,8 @@ pub(crate) fn gap_along(a: &Rss, b: &Placed, n: DVec3) -> f64 {
 /// failing certificate costs little. False also when more than `budget` nodes would be
 /// visited. Nodes whose support ties the limit (a face square to `n`) are skipped whole, which
 /// is what makes the certificate cheap on flat faces. `found` receives the first vertex above
-/// the limit (the caller tries it first next time: in a concavity the same far vertex keeps
-/// failing the certificate).
+/// the limit and its triangle (the caller tries it first next time: in a concavity the same
+/// far vertex keeps failing the certificate).
 pub(crate) fn support_below(
     nodes: &[DNode],
     tree: &ObbTree,
@@ -141,9 +141,9 @@ pub(crate) fn support_below(
     limit: f64,
     budget: u32,
     stack: &mut Vec<u32>,
-    found: &mut Option<DVec3>,
+    found: &mut Option<(DVec3, u32)>,
 ) -> bool {
-    if let Some(p) = *found {
+    if let Some((p, _)) = *found {
         if !(n.dot(p) <= limit) {
             return false;
         }
@@ -169,7 +169,7 @@ pub(crate) fn support_below(
             for &t in tree.node_triangles(id) {
                 for p in tree.triangle(t).v {
                     if !(n.dot(p) <= limit) {
-                        *found = Some(p);
+                        *found = Some((p, t));
                         return false;
                     }
                 }
