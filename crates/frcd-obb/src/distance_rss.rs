@@ -124,6 +124,15 @@ pub(crate) fn gap_along(a: &Rss, b: &Placed, n: DVec3) -> f64 {
     n.dot(b.c - a.c).abs() - a.extent(n) - b.extent(n) - a.r - b.r
 }
 
+/// `x` above `limit`, or either NaN (then nothing is certified).
+#[inline(always)]
+pub(crate) fn past(x: f64, limit: f64) -> bool {
+    !matches!(
+        x.partial_cmp(&limit),
+        Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
+    )
+}
+
 /// True when no vertex under `root` has a computed `n · x` above `limit`: a depth-first
 /// branch and bound on the volumes' support `n · c + a|n · u| + b|n · v| + r`, which skips
 /// every node whose computed support is at most `limit` (the rounding of that bound, a few
@@ -133,6 +142,7 @@ pub(crate) fn gap_along(a: &Rss, b: &Placed, n: DVec3) -> f64 {
 /// is what makes the certificate cheap on flat faces. `found` receives the first vertex above
 /// the limit and its triangle (the caller tries it first next time: in a concavity the same
 /// far vertex keeps failing the certificate).
+#[allow(clippy::too_many_arguments)] // one call site; a struct would only rename them
 pub(crate) fn support_below(
     nodes: &[DNode],
     tree: &ObbTree,
@@ -144,7 +154,7 @@ pub(crate) fn support_below(
     found: &mut Option<(DVec3, u32)>,
 ) -> bool {
     if let Some((p, _)) = *found {
-        if !(n.dot(p) <= limit) {
+        if past(n.dot(p), limit) {
             return false;
         }
     }
@@ -152,8 +162,8 @@ pub(crate) fn support_below(
         let v = &nodes[id as usize].rss;
         n.dot(v.c) + v.extent(n) + v.r
     };
-    // NaN limits and bounds decide nothing: `!(x <= limit)` treats them as above.
-    if ub(root) <= limit {
+    // NaN limits and bounds decide nothing: `past` treats them as above.
+    if !past(ub(root), limit) {
         return true;
     }
     stack.clear();
@@ -168,7 +178,7 @@ pub(crate) fn support_below(
         if d.is_leaf() {
             for &t in tree.node_triangles(id) {
                 for p in tree.triangle(t).v {
-                    if !(n.dot(p) <= limit) {
+                    if past(n.dot(p), limit) {
                         *found = Some((p, t));
                         return false;
                     }
@@ -185,10 +195,10 @@ pub(crate) fn support_below(
         } else {
             ((k1, u1), (k0, u0))
         };
-        if !(second.1 <= limit) {
+        if past(second.1, limit) {
             stack.push(second.0);
         }
-        if !(first.1 <= limit) {
+        if past(first.1, limit) {
             stack.push(first.0);
         }
     }
