@@ -20,7 +20,9 @@
 //! setups only: it is two to three orders of magnitude slower), with their agreement and
 //! frcd's median work (volume pairs, triangle pairs). frcd's time per setup is the fastest of
 //! 7 windows of 1 ms (the machine is shared; preempted windows are dropped), the median over
-//! setups is printed. `FRCD_DISTANCE_NO_PARRY=1` times parry on one setup only,
+//! setups is printed. `FRCD_DISTANCE_NO_PARRY=1` times parry on one setup only (`=0`: not at
+//! all), `FRCD_DISTANCE_ONLY=SUBSTRING` times only the rows whose `pair/kind` contains it,
+//! `FRCD_DISTANCE_SPIN=SECONDS` keeps querying each timed row that long (for a profiler),
 //! `FRCD_DISTANCE_DETAIL=1` prints every setup's time and work. When
 //! `FRCD_DISTANCE_EXPORT=DIR` is set, every pair's meshes and poses are written there as plain
 //! text, so a peer library run outside this repository can time the same queries.
@@ -204,29 +206,63 @@ fn pairs() -> Vec<Pair> {
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 /// Median over the setups of the seconds per call of `f`: each setup is timed in 7 windows of
 /// at least 1 ms and keeps its fastest window (the machine is shared: the minimum drops the
 /// windows in which the thread was preempted).
 fn time_each(n: usize, mut f: impl FnMut(usize)) -> f64 {
+    let cpu = std::env::var_os("FRCD_DISTANCE_CPU").is_some();
     let mut per = Vec::new();
     for i in 0..n {
         f(i); // warm
         let mut fastest = f64::INFINITY;
         for _ in 0..7 {
             let t = Instant::now();
+            let c0 = thread_cpu();
             let mut reps = 0u32;
             while t.elapsed() < Duration::from_millis(1) || reps == 0 {
                 f(i);
                 reps += 1;
             }
-            fastest = fastest.min(t.elapsed().as_secs_f64() / reps as f64);
+            let spent = if cpu {
+                thread_cpu() - c0
+            } else {
+                t.elapsed().as_secs_f64()
+            };
+            fastest = fastest.min(spent / reps as f64);
         }
         per.push(fastest);
     }
     median(per)
+}
+
+/// This thread's CPU time in seconds (`FRCD_DISTANCE_CPU=1` times with it instead of the wall
+/// clock: on a loaded machine it leaves out the time the thread waits for a core; for
+/// comparing two builds of frcd, not for the peer ratios, which use the wall clock).
+#[cfg(target_os = "linux")]
+fn thread_cpu() -> f64 {
+    #[repr(C)]
+    struct Timespec {
+        sec: i64,
+        nsec: i64,
+    }
+    unsafe extern "C" {
+        fn clock_gettime(clock: i32, tp: *mut Timespec) -> i32;
+    }
+    const CLOCK_THREAD_CPUTIME_ID: i32 = 3;
+    let mut t = Timespec { sec: 0, nsec: 0 };
+    // SAFETY: `t` is a valid, writable timespec; the call only writes it.
+    let rc = unsafe { clock_gettime(CLOCK_THREAD_CPUTIME_ID, &mut t) };
+    if rc != 0 {
+        return f64::NAN;
+    }
+    t.sec as f64 + t.nsec as f64 * 1e-9
+}
+#[cfg(not(target_os = "linux"))]
+fn thread_cpu() -> f64 {
+    f64::NAN
 }
 
 fn export(p: &Pair, dir: &Path) -> std::io::Result<()> {
@@ -268,16 +304,36 @@ fn bench(c: &mut Criterion) {
         "pair/kind", "tris A", "tris B", "frcd med", "parry med", "parry/frcd", "max |diff|"
     );
     let req = DistanceRequest::default();
+    // `FRCD_DISTANCE_ONLY=SUBSTRING`: time only the rows whose label contains it (profiling).
+    let only = std::env::var("FRCD_DISTANCE_ONLY").ok();
     for p in &all {
         if let Some(Err(e)) = export_dir.as_ref().map(|dir| export(p, dir)) {
             println!("export {}: {e}", p.name);
         }
         for (k, kind) in KINDS.iter().enumerate() {
+            if only
+                .as_ref()
+                .is_some_and(|o| !format!("{}/{kind}", p.name).contains(o.as_str()))
+            {
+                continue;
+            }
             let poses = &p.poses[k];
             let [ta, tb] = &p.trees;
             let frcd_t = time_each(poses.len(), |i| {
                 black_box(distance(ta, &poses[i].0, tb, &poses[i].1, &req));
             });
+            if let Some(secs) = std::env::var("FRCD_DISTANCE_SPIN")
+                .ok()
+                .and_then(|v| v.parse::<f64>().ok())
+            {
+                // Profiling: keep querying this row's setups for `secs` seconds.
+                let t = Instant::now();
+                while t.elapsed().as_secs_f64() < secs {
+                    for (pa, pb) in poses {
+                        black_box(distance(ta, pa, tb, pb, &req));
+                    }
+                }
+            }
             let work = |f: fn(&frcd_obb::distance::DistanceCounters) -> u64| {
                 median(
                     poses
@@ -305,8 +361,9 @@ fn bench(c: &mut Criterion) {
             let mut diff = 0.0f64;
             let mut supported = true;
             let mut parry_times = Vec::new();
-            let parry_setups = if std::env::var_os("FRCD_DISTANCE_NO_PARRY").is_some() {
-                1
+            let parry_setups = if let Some(v) = std::env::var_os("FRCD_DISTANCE_NO_PARRY") {
+                // `=0`: no parry call at all (profiling).
+                if v == "0" { 0 } else { 1 }
             } else {
                 PARRY_SETUPS
             };

@@ -90,21 +90,31 @@ impl Rss {
 
 /// Lower bound on the distance between two volumes (same frame), not yet reduced by the
 /// caller's rounding slack; negative when they may overlap. Alternating projections between the
-/// rectangles (from B's centre) give a direction; the bound is the volumes' separation along it.
-/// Also returns that direction (not normalised; zero when the rectangles meet).
-#[inline]
-pub(crate) fn lower_bound(a: &Rss, b: &Placed) -> (f64, DVec3) {
+/// rectangles (from B's centre; three projections with `refine`, else two) give a direction;
+/// the bound is the volumes' separation along it. When that bound is clearly at least
+/// `prune_at` (decided on squares, with a relative `8 ε` to spare, so without the square root
+/// and the division) the result is `+∞`: the caller prunes the pair either way.
+#[inline(always)]
+pub(crate) fn lower_bound(a: &Rss, b: &Placed, refine: bool, prune_at: f64) -> f64 {
     let mut p = a.clamp(b.c);
     let q = b.clamp(p);
-    p = a.clamp(q);
+    // A third projection sharpens the direction near contact (measured: a fourth made the
+    // near searches slower); at range two give as good a bound for less.
+    if refine {
+        p = a.clamp(q);
+    }
     let n = q - p;
     let len2 = n.length_squared();
     // Also catches NaN (not finite).
     if len2 <= 0.0 || !len2.is_finite() {
-        return (-(a.r + b.r), DVec3::ZERO);
+        return -(a.r + b.r);
     }
     let proj = n.dot(b.c - a.c) - a.extent(n) - b.extent(n);
-    (proj / len2.sqrt() - a.r - b.r, n)
+    let k = prune_at + a.r + b.r;
+    if k > 0.0 && proj > 0.0 && proj * proj >= k * k * len2 * (1.0 + 8.0 * f64::EPSILON) {
+        return f64::INFINITY;
+    }
+    proj / len2.sqrt() - a.r - b.r
 }
 
 /// Separation of a volume from a direction `n` (unit) and B's placed volume, as [`lower_bound`]
@@ -114,57 +124,85 @@ pub(crate) fn gap_along(a: &Rss, b: &Placed, n: DVec3) -> f64 {
     n.dot(b.c - a.c).abs() - a.extent(n) - b.extent(n) - a.r - b.r
 }
 
-/// The largest `n · x` over the vertices under `root` (computed dot products of actual
-/// vertices; every vertex not visited has an exact dot product at most the result plus
-/// `slack`): branch and bound on the volumes' support `n · c + a|n · u| + b|n · v| + r`.
-/// `+∞` (no bound) when more than `budget` nodes would be visited: a face perpendicular to
-/// `n` ties every vertex on it, and the certificate is not worth that walk.
-pub(crate) fn support(
+/// `x` above `limit`, or either NaN (then nothing is certified).
+#[inline(always)]
+pub(crate) fn past(x: f64, limit: f64) -> bool {
+    !matches!(
+        x.partial_cmp(&limit),
+        Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
+    )
+}
+
+/// True when no vertex under `root` has a computed `n · x` above `limit`: a depth-first
+/// branch and bound on the volumes' support `n · c + a|n · u| + b|n · v| + r`, which skips
+/// every node whose computed support is at most `limit` (the rounding of that bound, a few
+/// `ε M`, is part of the caller's allowance) and stops at the first vertex above it, so a
+/// failing certificate costs little. False also when more than `budget` nodes would be
+/// visited. Nodes whose support ties the limit (a face square to `n`) are skipped whole, which
+/// is what makes the certificate cheap on flat faces. `found` receives the first vertex above
+/// the limit and its triangle (the caller tries it first next time: in a concavity the same
+/// far vertex keeps failing the certificate).
+#[allow(clippy::too_many_arguments)] // one call site; a struct would only rename them
+pub(crate) fn support_below(
     nodes: &[DNode],
     tree: &ObbTree,
     root: u32,
     n: DVec3,
-    slack: f64,
+    limit: f64,
     budget: u32,
-    stack: &mut Vec<(u32, f64)>,
-) -> f64 {
+    stack: &mut Vec<u32>,
+    found: &mut Option<(DVec3, u32)>,
+) -> bool {
+    if let Some((p, _)) = *found {
+        if past(n.dot(p), limit) {
+            return false;
+        }
+    }
     let ub = |id: u32| {
         let v = &nodes[id as usize].rss;
         n.dot(v.c) + v.extent(n) + v.r
     };
-    let mut best = f64::NEG_INFINITY;
+    // NaN limits and bounds decide nothing: `past` treats them as above.
+    if !past(ub(root), limit) {
+        return true;
+    }
     stack.clear();
-    stack.push((root, f64::INFINITY));
+    stack.push(root);
     let mut visits = 0u32;
-    while let Some((id, bound)) = stack.pop() {
-        if bound + slack <= best {
-            continue;
-        }
+    while let Some(id) = stack.pop() {
         visits += 1;
         if visits > budget {
-            return f64::INFINITY;
+            return false;
         }
         let d = &nodes[id as usize];
         if d.is_leaf() {
             for &t in tree.node_triangles(id) {
                 for p in tree.triangle(t).v {
-                    best = best.max(n.dot(p));
+                    if past(n.dot(p), limit) {
+                        *found = Some((p, t));
+                        return false;
+                    }
                 }
             }
             continue;
         }
         let [k0, k1] = d.kids;
         let (u0, u1) = (ub(k0), ub(k1));
-        // The child with the larger bound is visited first (pushed last).
-        if u0 >= u1 {
-            stack.push((k1, u1));
-            stack.push((k0, u0));
+        // The child with the larger bound (the likelier to hold a vertex above the limit) is
+        // visited first: pushed last.
+        let (first, second) = if u0 >= u1 {
+            ((k0, u0), (k1, u1))
         } else {
-            stack.push((k0, u0));
-            stack.push((k1, u1));
+            ((k1, u1), (k0, u0))
+        };
+        if past(second.1, limit) {
+            stack.push(second.0);
+        }
+        if past(first.1, limit) {
+            stack.push(first.0);
         }
     }
-    best
+    true
 }
 
 /// Builds one volume per node, indexed by node id.
@@ -361,8 +399,12 @@ mod tests {
         let t = DVec3::new(2.1, 0.3, -0.2);
         for na in 0..40u32 {
             for nb in 0..40u32 {
-                let (lb, _) =
-                    lower_bound(&vols[na as usize].rss, &vols[nb as usize].rss.mapped(&m, t));
+                let lb = lower_bound(
+                    &vols[na as usize].rss,
+                    &vols[nb as usize].rss.mapped(&m, t),
+                    true,
+                    f64::INFINITY,
+                );
                 let mut best = f64::INFINITY;
                 let (mut ua, mut ub) = (vec![na], vec![nb]);
                 let mut pa = Vec::new();
