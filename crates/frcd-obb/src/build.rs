@@ -285,7 +285,10 @@ fn box_and_split(
         return (obb, l, sums);
     }
     let mid = split_fallback(&axes, mean, dst);
-    let sums = [Moments::of(&dst[..mid], mean), Moments::of(&dst[mid..], mean)];
+    let sums = [
+        Moments::of(&dst[..mid], mean),
+        Moments::of(&dst[mid..], mean),
+    ];
     (obb, mid, sums)
 }
 
@@ -524,8 +527,7 @@ mod tests {
                 continue;
             }
             let mean = tris.iter().map(Triangle::centroid).sum::<DVec3>() / (hi - lo) as f64;
-            let (_, mid, _) =
-                box_and_split(obb.axes, mean, &items[lo..hi], &mut scratch[lo..hi]);
+            let (_, mid, _) = box_and_split(obb.axes, mean, &items[lo..hi], &mut scratch[lo..hi]);
             items[lo..hi].copy_from_slice(&scratch[lo..hi]);
             stack.push((lo, lo + mid));
             stack.push((lo + mid, hi));
