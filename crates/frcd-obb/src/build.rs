@@ -1,10 +1,14 @@
 //! Building an [`ObbTree`](crate::ObbTree)'s hierarchy: top-down splits with a fitted box per
 //! node.
 //!
-//! The output contract, which the traversal layout is converted from: depth-first `Vec<Node>`
-//! with f64 boxes in the mesh's local frame (left child = next node, `right`; leaves
-//! `first`/`count`) and the `order` permutation of input-mesh triangle indices that leaves index.
+//! The output: depth-first nodes (left child = next node, `right`; leaves `first`/`count`) and
+//! the `order` permutation of input-mesh triangle indices that leaves index. Each box is made
+//! in f64 in the mesh's local frame and written straight into the compact f32 traversal layout
+//! of `nodes.rs` ([`build_compact`], what [`ObbTree::build`](crate::ObbTree::build) uses); the
+//! tests also read the f64 boxes (`build_nodes`, the same build into `Vec<Node>`) and check
+//! that converting them gives exactly the compact nodes.
 
+use crate::nodes::{LEAF, TNode, compact_box};
 use crate::tree::{BuildOptions, Node};
 use frcd_geom::fit::{
     FitMethod, area_weighted_axes, fit_obb, hull_surface_axes, symmetric_eigen_axes,
@@ -41,7 +45,101 @@ impl Item {
 /// place: each triangle is copied to the front (left) or the back (right) of the same range of
 /// a second buffer, which the children read from (the two buffers alternate by depth), so a
 /// node's triangles are one contiguous slice.
+#[cfg(test)]
 pub(crate) fn build_nodes(mesh: &TriMesh, options: &BuildOptions) -> (Vec<Node>, Vec<u32>) {
+    let mut nodes: Vec<Node> = Vec::new();
+    let order = build_into(mesh, options, &mut nodes);
+    (nodes, order)
+}
+
+/// The build (`build_nodes` in the tests) straight into the traversal layout (`nodes.rs`):
+/// each box converted to its compact f32 form as it is made, without the f64 node list.
+/// Returns the nodes, the leaf order and its leaf-end bits (bit `k` set when leaf-order entry `k` is the last of its leaf).
+pub(crate) fn build_compact(
+    mesh: &TriMesh,
+    options: &BuildOptions,
+) -> (Vec<TNode>, Vec<u32>, Vec<u64>) {
+    let mut sink = Compact {
+        nodes: Vec::new(),
+        ends: vec![0u64; mesh.triangle_count().div_ceil(64).max(1)],
+    };
+    let order = build_into(mesh, options, &mut sink);
+    (sink.nodes, order, sink.ends)
+}
+
+/// Where the build puts its nodes, depth-first.
+trait Sink {
+    fn reserve(&mut self, n: usize);
+    fn len(&self) -> usize;
+    fn internal(&mut self, obb: &Obb);
+    fn leaf(&mut self, obb: &Obb, first: u32, count: u32);
+    /// Links internal node `parent` to its right child `right`.
+    fn set_right(&mut self, parent: u32, right: u32);
+}
+
+impl Sink for Vec<Node> {
+    fn reserve(&mut self, n: usize) {
+        Vec::reserve(self, n);
+    }
+    fn len(&self) -> usize {
+        Vec::len(self)
+    }
+    fn internal(&mut self, obb: &Obb) {
+        self.push(Node {
+            obb: *obb,
+            right: 0,
+            first: 0,
+            count: 0,
+        });
+    }
+    fn leaf(&mut self, obb: &Obb, first: u32, count: u32) {
+        self.push(Node {
+            obb: *obb,
+            right: 0,
+            first,
+            count,
+        });
+    }
+    fn set_right(&mut self, parent: u32, right: u32) {
+        self[parent as usize].right = right;
+    }
+}
+
+/// The traversal layout being built.
+struct Compact {
+    nodes: Vec<TNode>,
+    ends: Vec<u64>,
+}
+
+impl Sink for Compact {
+    fn reserve(&mut self, n: usize) {
+        self.nodes.reserve(n);
+    }
+    fn len(&self) -> usize {
+        self.nodes.len()
+    }
+    fn internal(&mut self, obb: &Obb) {
+        let (c, h, u) = compact_box(obb);
+        self.nodes.push(TNode { c, h, u, link: 0 });
+    }
+    fn leaf(&mut self, obb: &Obb, first: u32, count: u32) {
+        let (c, h, u) = compact_box(obb);
+        let last = (first + count - 1) as usize;
+        self.ends[last / 64] |= 1 << (last % 64);
+        self.nodes.push(TNode {
+            c,
+            h,
+            u,
+            link: LEAF | first,
+        });
+    }
+    fn set_right(&mut self, parent: u32, right: u32) {
+        self.nodes[parent as usize].link = right;
+    }
+}
+
+/// The build proper, into `sink`; returns the leaf order.
+fn build_into(mesh: &TriMesh, options: &BuildOptions, sink: &mut impl Sink) -> Vec<u32> {
     let n = mesh.triangle_count();
     let leaf = options.max_leaf_triangles.max(1) as usize;
     let mut front: Vec<Item> = mesh
@@ -55,18 +153,21 @@ pub(crate) fn build_nodes(mesh: &TriMesh, options: &BuildOptions) -> (Vec<Node>,
         .collect();
     let mut back = vec![Item::ZERO; n];
     let mut order = vec![0u32; n];
-    let mut nodes: Vec<Node> = Vec::with_capacity(2 * n.div_ceil(leaf));
+    let nodes = sink;
+    nodes.reserve(2 * n.div_ceil(leaf));
     let root = {
         let sum = front.iter().map(|t| t.triangle().centroid()).sum::<DVec3>();
-        Moments::of(&front, sum / n.max(1) as f64)
+        let m = Moments::of(&front, sum / n.max(1) as f64);
+        (m.mean(n.max(1)), m.axes(&front, options.fit))
     };
     // (lo, hi, parent whose `right` this node is or u32::MAX, the buffer holding the node's
-    // triangles (false: `front`), the node's moments)
-    let mut stack: Vec<(usize, usize, u32, bool, Moments)> = vec![(0, n, u32::MAX, false, root)];
-    while let Some((lo, hi, parent, in_back, moments)) = stack.pop() {
+    // triangles (false: `front`), the node's mean, its axes when the parent found them)
+    let mut stack: Vec<(usize, usize, u32, bool, DVec3, Option<DMat3>)> =
+        vec![(0, n, u32::MAX, false, root.0, root.1)];
+    while let Some((lo, hi, parent, in_back, mean, axes)) = stack.pop() {
         let index = nodes.len() as u32;
         if parent != u32::MAX {
-            nodes[parent as usize].right = index;
+            nodes.set_right(parent, index);
         }
         let (src, dst) = if in_back {
             (&back[lo..hi], &mut front[lo..hi])
@@ -77,60 +178,47 @@ pub(crate) fn build_nodes(mesh: &TriMesh, options: &BuildOptions) -> (Vec<Node>,
             for (o, t) in order[lo..hi].iter_mut().zip(src) {
                 *o = t.id;
             }
-            nodes.push(Node {
-                obb: leaf_obb(src, &moments, options.fit),
-                right: 0,
-                first: lo as u32,
-                count: (hi - lo) as u32,
-            });
+            nodes.leaf(
+                &leaf_obb(src, axes, options.fit),
+                lo as u32,
+                (hi - lo) as u32,
+            );
             continue;
         }
-        let mean = moments.mean(hi - lo);
-        let axes = match options.fit {
-            FitMethod::VertexCovariance => symmetric_eigen_axes(
-                moments
-                    .covariance(hi - lo)
-                    .unwrap_or_else(|| vertex_covariance(src, mean)),
-            ),
+        let axes = axes.unwrap_or_else(|| match options.fit {
             FitMethod::AreaWeighted => {
                 area_weighted_axes(&src.iter().map(Item::triangle).collect::<Vec<_>>())
             }
             FitMethod::HullSurface => {
                 hull_surface_axes(&src.iter().flat_map(|t| t.v).collect::<Vec<_>>())
             }
-        };
-        let (obb, mid, sums) = box_and_split(axes, mean, src, dst);
-        nodes.push(Node {
-            obb,
-            right: 0,
-            first: 0,
-            count: 0,
+            FitMethod::VertexCovariance => symmetric_eigen_axes(vertex_covariance(src, mean)),
         });
+        let (obb, mid, sums) = box_and_split(axes, mean, src, dst);
+        nodes.internal(&obb);
+        // Both children's axes here, one eigen-solve after the other: independent, so their
+        // long division and square-root chains overlap in the processor.
+        let (ls, rs) = dst.split_at(mid);
         let [left, right] = sums;
-        stack.push((lo + mid, hi, index, !in_back, right));
-        stack.push((lo, lo + mid, u32::MAX, !in_back, left));
+        let (la, ra) = (left.axes(ls, options.fit), right.axes(rs, options.fit));
+        stack.push((lo + mid, hi, index, !in_back, right.mean(rs.len()), ra));
+        stack.push((lo, lo + mid, u32::MAX, !in_back, left.mean(ls.len()), la));
     }
-    (nodes, order)
+    order
 }
 
 /// The box of a leaf (at least one triangle): a lone triangle's own frame, else the axes of the
 /// fit rule (for the vertex covariance, from the moments the parent summed).
-fn leaf_obb(items: &[Item], moments: &Moments, fit: FitMethod) -> Obb {
-    let tris = || items.iter().map(Item::triangle);
+fn leaf_obb(items: &[Item], axes: Option<DMat3>, fit: FitMethod) -> Obb {
     if let [t] = items {
         if let Some(obb) = triangle_obb(&t.triangle()) {
             return obb;
         }
     }
-    let axes = match fit {
-        FitMethod::VertexCovariance => symmetric_eigen_axes(
-            moments
-                .covariance(items.len())
-                .unwrap_or_else(|| vertex_covariance(items, moments.mean(items.len()))),
-        ),
-        _ => return fit_obb(&tris().collect::<Vec<_>>(), fit),
-    };
-    Obb::from_point_iter_with_axes(items.iter().flat_map(|t| t.v), axes)
+    match axes {
+        Some(axes) => Obb::from_point_iter_with_axes(items.iter().flat_map(|t| t.v), axes),
+        None => fit_obb(&items.iter().map(Item::triangle).collect::<Vec<_>>(), fit),
+    }
 }
 
 /// Sums over a node's triangles, gathered by its parent's pass: the vertices' first and second
@@ -176,6 +264,20 @@ impl Moments {
             self.second[4] += d.y * d.z;
             self.second[5] += d.z * d.z;
         }
+    }
+
+    /// The vertex-covariance axes of the node `items` these moments were summed over (from
+    /// the moments; from a second pass when they are too far from the reference point), or
+    /// `None` where the node will not need them: a lone triangle (a leaf in its own frame) and
+    /// other fit rules (the node fits itself).
+    fn axes(&self, items: &[Item], fit: FitMethod) -> Option<DMat3> {
+        if fit != FitMethod::VertexCovariance || items.len() < 2 {
+            return None;
+        }
+        let cov = self
+            .covariance(items.len())
+            .unwrap_or_else(|| vertex_covariance(items, self.mean(items.len())));
+        Some(symmetric_eigen_axes(cov))
     }
 
     /// The mean of the `count` triangles' vertices (also the mean of their centroids).
@@ -495,6 +597,26 @@ mod tests {
                             assert!(hi - lo <= leaf as usize && hi > lo);
                         }
                     }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn compact_build_equals_the_converted_f64_build() {
+        for (name, mesh) in meshes() {
+            for fit in [FitMethod::VertexCovariance, FitMethod::AreaWeighted] {
+                for leaf in [1, 2, 5] {
+                    let options = BuildOptions {
+                        fit,
+                        max_leaf_triangles: leaf,
+                    };
+                    let (nodes, order) = build_nodes(&mesh, &options);
+                    let (want_nodes, want_ends) = crate::nodes::compact(&nodes, order.len());
+                    let (got_nodes, got_order, got_ends) = build_compact(&mesh, &options);
+                    assert_eq!(got_order, order, "{name} {fit:?} {leaf}");
+                    assert_eq!(got_nodes, want_nodes, "{name} {fit:?} {leaf}");
+                    assert_eq!(got_ends, want_ends, "{name} {fit:?} {leaf}");
                 }
             }
         }

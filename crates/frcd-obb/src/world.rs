@@ -770,7 +770,7 @@ impl World {
             .filter(|e| !e.reused)
             .map(|e| (e.state.cost_ns, e))
             .collect();
-        jobs.sort_unstable_by(|x, y| y.0.cmp(&x.0));
+        jobs.sort_unstable_by_key(|x| std::cmp::Reverse(x.0));
         let t_narrow = Instant::now();
         #[cfg(feature = "parallel")]
         let threads = {
