@@ -6,16 +6,25 @@
 //! little each step (no answer is reused), all-pairs mode with coherence caches. The
 //! `world/step_ratio` line times both pools interleaved, step by step, and prints the medians
 //! and their ratio (the machine's load moves both alike); the criterion rows time each alone.
+//! The `world/timing` lines split the median step ([`frcd_obb::StepTiming`]): sequential
+//! broad phase and collection, the narrow phase's wall time, the pair evaluations' summed time
+//! and longest pair, and the narrow phase's parallel efficiency `pair time / (threads · narrow
+//! wall)`: below 100 % is idle time and scheduling overhead, or a thread that did not get a
+//! core (on a loaded machine compare with the load average printed). On a loaded machine the
+//! `world/step_least` line is the steadier figure: for each frame of the cycle, the least
+//! disturbed of its steps on each pool, summed over the cycle, and their ratio (give it several
+//! cycles: `FRCD_WORLD_SECS`).
 //!
 //! ```text
 //! cargo bench -p frcd-benches --bench world -- --warm-up-time 1 --measurement-time 3
+//! FRCD_WORLD_SECS=20 cargo bench -p frcd-benches --bench world -- step_ratio  # longer ratio run
 //! ```
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use frcd_benches::scenes::Rng;
 use frcd_geom::shapes::{self, TorusKnotParams, torus_knot};
 use frcd_geom::{DQuat, DVec3, Pose, TriMesh};
-use frcd_obb::{BodyId, BuildOptions, ObbTree, World, WorldOptions};
+use frcd_obb::{BodyId, BuildOptions, ObbTree, StepTiming, World, WorldOptions};
 use std::hint::black_box;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -123,6 +132,32 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
+/// Medians (and minima: the least disturbed steps) of each part of the step's timing, and the
+/// median efficiency.
+fn timing_line(label: &str, t: &[StepTiming]) -> String {
+    let us = |f: &dyn Fn(&StepTiming) -> f64| {
+        let v: Vec<f64> = t.iter().map(f).collect();
+        let min = v.iter().copied().fold(f64::INFINITY, f64::min);
+        format!("{:.0} us (min {:.0})", median(v) * 1e6, min * 1e6)
+    };
+    let eff = median(
+        t.iter()
+            .map(|x| {
+                x.pair_time.as_secs_f64() / (x.threads as f64 * x.narrow.as_secs_f64()).max(1e-12)
+            })
+            .collect(),
+    );
+    format!(
+        "{label}: broad {}, narrow {} (pairs {}, longest pair {}, efficiency {:.1} %), collect {}",
+        us(&|x| x.broad.as_secs_f64()),
+        us(&|x| x.narrow.as_secs_f64()),
+        us(&|x| x.pair_time.as_secs_f64()),
+        us(&|x| x.max_pair.as_secs_f64()),
+        eff * 100.0,
+        us(&|x| x.collect.as_secs_f64()),
+    )
+}
+
 fn load() -> String {
     std::fs::read_to_string("/proc/loadavg")
         .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
@@ -142,17 +177,38 @@ fn bench_world(c: &mut Criterion) {
     }
     // Interleaved: both pools see the same load.
     let (mut t1, mut t2) = (Vec::new(), Vec::new());
-    let t_end = Instant::now() + Duration::from_secs(4);
+    let (mut s1, mut s2) = (Vec::new(), Vec::new());
+    let secs = std::env::var("FRCD_WORLD_SECS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(4.0);
+    let t_end = Instant::now() + Duration::from_secs_f64(secs);
     let mut k = 0;
     while Instant::now() < t_end || t1.len() < 20 {
         let t = Instant::now();
         black_box(step(&mut w1, &ids1, &s, k));
         t1.push(t.elapsed().as_secs_f64());
+        s1.push(w1.last_step_timing());
         let t = Instant::now();
         black_box(step(&mut w2, &ids2, &s, k));
         t2.push(t.elapsed().as_secs_f64());
+        s2.push(w2.last_step_timing());
         k += 1;
     }
+    // Per frame of the cycle, the least disturbed step of each pool; summed over the frames.
+    let least = |t: &[f64]| -> f64 {
+        (0..FRAMES)
+            .map(|f| {
+                t.iter()
+                    .skip(f)
+                    .step_by(FRAMES)
+                    .copied()
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .filter(|x| x.is_finite())
+            .sum()
+    };
+    let (l1, l2) = (least(&t1), least(&t2));
     let (m1, m2) = (median(t1), median(t2));
     println!(
         "world/step_ratio: {} bodies, {:.1} candidate pairs and {:.1} touching pairs per step; 1 thread {:.3} ms, 2 threads {:.3} ms median over {} steps each: {:.2}x (load average {})",
@@ -165,6 +221,15 @@ fn bench_world(c: &mut Criterion) {
         m1 / m2,
         load()
     );
+    println!(
+        "world/step_least: per frame of the {FRAMES}-frame cycle the least disturbed step ({:.1} cycles), summed: 1 thread {:.2} ms, 2 threads {:.2} ms: {:.2}x",
+        k as f64 / FRAMES as f64,
+        l1 * 1e3,
+        l2 * 1e3,
+        l1 / l2
+    );
+    println!("{}", timing_line("world/timing 1 thread", &s1));
+    println!("{}", timing_line("world/timing 2 threads", &s2));
     let mut g = c.benchmark_group("world");
     g.sample_size(20);
     let mut k1 = 0;

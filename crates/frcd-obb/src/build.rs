@@ -1,88 +1,229 @@
 //! Building an [`ObbTree`](crate::ObbTree)'s hierarchy: top-down splits with a fitted box per
 //! node.
 //!
-//! The output contract, which the traversal layout is converted from: depth-first `Vec<Node>`
-//! with f64 boxes in the mesh's local frame (left child = next node, `right`; leaves
-//! `first`/`count`) and the `order` permutation of input-mesh triangle indices that leaves index.
+//! The output: depth-first nodes (left child = next node, `right`; leaves `first`/`count`) and
+//! the `order` permutation of input-mesh triangle indices that leaves index. Each box is made
+//! in f64 in the mesh's local frame and written straight into the compact f32 traversal layout
+//! of `nodes.rs` ([`build_compact`], what [`ObbTree::build`](crate::ObbTree::build) uses); the
+//! tests also read the f64 boxes (`build_nodes`, the same build into `Vec<Node>`) and check
+//! that converting them gives exactly the compact nodes.
 
+use crate::nodes::{LEAF, TNode, compact_box};
 use crate::tree::{BuildOptions, Node};
 use frcd_geom::fit::{
     FitMethod, area_weighted_axes, fit_obb, hull_surface_axes, symmetric_eigen_axes,
 };
 use frcd_geom::{DMat3, DVec3, Obb, TriMesh, Triangle};
 
+/// A triangle as the build moves it: its vertices, its largest `|p|₁` (the box's rounding
+/// slack scales with it) and its index in the input mesh.
+#[derive(Clone, Copy, Debug)]
+struct Item {
+    v: [DVec3; 3],
+    mag: f64,
+    id: u32,
+}
+
+impl Item {
+    const ZERO: Item = Item {
+        v: [DVec3::ZERO; 3],
+        mag: 0.0,
+        id: 0,
+    };
+
+    fn triangle(&self) -> Triangle {
+        Triangle { v: self.v }
+    }
+}
+
 /// Builds the nodes (depth-first, node 0 the root) and the leaf order of `mesh`'s triangles.
 ///
 /// Each internal node costs one pass over its triangles, which projects its vertices on the
 /// fitted axes (the box), partitions the triangles about the split plane and sums each side's
-/// moments (the children's means and covariances, see [`Moments`]), and one eigen-solve.
-/// Triangles are permuted in place alongside `order`, so a node's triangles are one contiguous
-/// slice.
+/// moments (the children's means and covariances, see [`Moments`]), and one eigen-solve; a
+/// leaf's axes come from the moments its parent summed. The partition is branchless and out of
+/// place: each triangle is copied to the front (left) or the back (right) of the same range of
+/// a second buffer, which the children read from (the two buffers alternate by depth), so a
+/// node's triangles are one contiguous slice.
+#[cfg(test)]
 pub(crate) fn build_nodes(mesh: &TriMesh, options: &BuildOptions) -> (Vec<Node>, Vec<u32>) {
-    let mut tris: Vec<Triangle> = mesh.triangles().collect();
-    // Each triangle's largest `|p|₁` (the box's rounding slack scales with it), permuted alongside.
-    let mut mags: Vec<f64> = tris.iter().map(magnitude).collect();
-    let n = tris.len();
-    let leaf = options.max_leaf_triangles.max(1) as usize;
-    let mut order: Vec<u32> = (0..n as u32).collect();
-    let mut nodes: Vec<Node> = Vec::with_capacity(2 * n.div_ceil(leaf));
-    let root = {
-        let mean = tris.iter().map(Triangle::centroid).sum::<DVec3>() / n.max(1) as f64;
-        Moments::of(&tris, mean)
+    let mut nodes: Vec<Node> = Vec::new();
+    let order = build_into(mesh, options, &mut nodes);
+    (nodes, order)
+}
+
+/// The build (`build_nodes` in the tests) straight into the traversal layout (`nodes.rs`):
+/// each box converted to its compact f32 form as it is made, without the f64 node list.
+/// Returns the nodes, the leaf order and its leaf-end bits (bit `k` set when leaf-order entry `k` is the last of its leaf).
+pub(crate) fn build_compact(
+    mesh: &TriMesh,
+    options: &BuildOptions,
+) -> (Vec<TNode>, Vec<u32>, Vec<u64>) {
+    let mut sink = Compact {
+        nodes: Vec::new(),
+        ends: vec![0u64; mesh.triangle_count().div_ceil(64).max(1)],
     };
-    // (lo, hi, parent whose `right` this node is or u32::MAX, the node's moments)
-    let mut stack: Vec<(usize, usize, u32, Moments)> = vec![(0, n, u32::MAX, root)];
-    while let Some((lo, hi, parent, moments)) = stack.pop() {
-        let index = nodes.len() as u32;
-        if parent != u32::MAX {
-            nodes[parent as usize].right = index;
-        }
-        if hi - lo <= leaf {
-            let obb = match &tris[lo..hi] {
-                [t] => triangle_obb(t).unwrap_or_else(|| fit_obb(&tris[lo..hi], options.fit)),
-                some => fit_obb(some, options.fit),
-            };
-            nodes.push(Node {
-                obb,
-                right: 0,
-                first: lo as u32,
-                count: (hi - lo) as u32,
-            });
-            continue;
-        }
-        let node = &mut tris[lo..hi];
-        let mean = moments.centroids / (hi - lo) as f64;
-        let axes = match options.fit {
-            FitMethod::VertexCovariance => {
-                let cov = moments
-                    .covariance(hi - lo)
-                    .unwrap_or_else(|| vertex_covariance(node, mean));
-                symmetric_eigen_axes(cov)
-            }
-            FitMethod::AreaWeighted => area_weighted_axes(node),
-            FitMethod::HullSurface => {
-                hull_surface_axes(&node.iter().flat_map(|t| t.v).collect::<Vec<_>>())
-            }
-        };
-        let (obb, mid, sums) =
-            box_and_split(axes, mean, &mut order[lo..hi], node, &mut mags[lo..hi]);
-        nodes.push(Node {
-            obb,
+    let order = build_into(mesh, options, &mut sink);
+    (sink.nodes, order, sink.ends)
+}
+
+/// Where the build puts its nodes, depth-first.
+trait Sink {
+    fn reserve(&mut self, n: usize);
+    fn len(&self) -> usize;
+    fn internal(&mut self, obb: &Obb);
+    fn leaf(&mut self, obb: &Obb, first: u32, count: u32);
+    /// Links internal node `parent` to its right child `right`.
+    fn set_right(&mut self, parent: u32, right: u32);
+}
+
+impl Sink for Vec<Node> {
+    fn reserve(&mut self, n: usize) {
+        Vec::reserve(self, n);
+    }
+    fn len(&self) -> usize {
+        Vec::len(self)
+    }
+    fn internal(&mut self, obb: &Obb) {
+        self.push(Node {
+            obb: *obb,
             right: 0,
             first: 0,
             count: 0,
         });
-        let [left, right] = sums;
-        stack.push((lo + mid, hi, index, right));
-        stack.push((lo, lo + mid, u32::MAX, left));
     }
-    (nodes, order)
+    fn leaf(&mut self, obb: &Obb, first: u32, count: u32) {
+        self.push(Node {
+            obb: *obb,
+            right: 0,
+            first,
+            count,
+        });
+    }
+    fn set_right(&mut self, parent: u32, right: u32) {
+        self[parent as usize].right = right;
+    }
 }
 
-/// Sums over a node's triangles, gathered by its parent's pass: the centroids (their mean is the
-/// vertices' mean and the split point) and the vertices' first and second moments about a
-/// reference point `r` near the node (the parent's mean), from which the covariance follows
-/// without another pass.
+/// The traversal layout being built.
+struct Compact {
+    nodes: Vec<TNode>,
+    ends: Vec<u64>,
+}
+
+impl Sink for Compact {
+    fn reserve(&mut self, n: usize) {
+        self.nodes.reserve(n);
+    }
+    fn len(&self) -> usize {
+        self.nodes.len()
+    }
+    fn internal(&mut self, obb: &Obb) {
+        let (c, h, u) = compact_box(obb);
+        self.nodes.push(TNode { c, h, u, link: 0 });
+    }
+    fn leaf(&mut self, obb: &Obb, first: u32, count: u32) {
+        let (c, h, u) = compact_box(obb);
+        let last = (first + count - 1) as usize;
+        self.ends[last / 64] |= 1 << (last % 64);
+        self.nodes.push(TNode {
+            c,
+            h,
+            u,
+            link: LEAF | first,
+        });
+    }
+    fn set_right(&mut self, parent: u32, right: u32) {
+        self.nodes[parent as usize].link = right;
+    }
+}
+
+/// The build proper, into `sink`; returns the leaf order.
+fn build_into(mesh: &TriMesh, options: &BuildOptions, sink: &mut impl Sink) -> Vec<u32> {
+    let n = mesh.triangle_count();
+    let leaf = options.max_leaf_triangles.max(1) as usize;
+    let mut front: Vec<Item> = mesh
+        .triangles()
+        .enumerate()
+        .map(|(i, t)| Item {
+            v: t.v,
+            mag: magnitude(&t),
+            id: i as u32,
+        })
+        .collect();
+    let mut back = vec![Item::ZERO; n];
+    let mut order = vec![0u32; n];
+    let nodes = sink;
+    nodes.reserve(2 * n.div_ceil(leaf));
+    let root = {
+        let sum = front.iter().map(|t| t.triangle().centroid()).sum::<DVec3>();
+        let m = Moments::of(&front, sum / n.max(1) as f64);
+        (m.mean(n.max(1)), m.axes(&front, options.fit))
+    };
+    // (lo, hi, parent whose `right` this node is or u32::MAX, the buffer holding the node's
+    // triangles (false: `front`), the node's mean, its axes when the parent found them)
+    let mut stack: Vec<(usize, usize, u32, bool, DVec3, Option<DMat3>)> =
+        vec![(0, n, u32::MAX, false, root.0, root.1)];
+    while let Some((lo, hi, parent, in_back, mean, axes)) = stack.pop() {
+        let index = nodes.len() as u32;
+        if parent != u32::MAX {
+            nodes.set_right(parent, index);
+        }
+        let (src, dst) = if in_back {
+            (&back[lo..hi], &mut front[lo..hi])
+        } else {
+            (&front[lo..hi], &mut back[lo..hi])
+        };
+        if hi - lo <= leaf {
+            for (o, t) in order[lo..hi].iter_mut().zip(src) {
+                *o = t.id;
+            }
+            nodes.leaf(
+                &leaf_obb(src, axes, options.fit),
+                lo as u32,
+                (hi - lo) as u32,
+            );
+            continue;
+        }
+        let axes = axes.unwrap_or_else(|| match options.fit {
+            FitMethod::AreaWeighted => {
+                area_weighted_axes(&src.iter().map(Item::triangle).collect::<Vec<_>>())
+            }
+            FitMethod::HullSurface => {
+                hull_surface_axes(&src.iter().flat_map(|t| t.v).collect::<Vec<_>>())
+            }
+            FitMethod::VertexCovariance => symmetric_eigen_axes(vertex_covariance(src, mean)),
+        });
+        let (obb, mid, sums) = box_and_split(axes, mean, src, dst);
+        nodes.internal(&obb);
+        // Both children's axes here, one eigen-solve after the other: independent, so their
+        // long division and square-root chains overlap in the processor.
+        let (ls, rs) = dst.split_at(mid);
+        let [left, right] = sums;
+        let (la, ra) = (left.axes(ls, options.fit), right.axes(rs, options.fit));
+        stack.push((lo + mid, hi, index, !in_back, right.mean(rs.len()), ra));
+        stack.push((lo, lo + mid, u32::MAX, !in_back, left.mean(ls.len()), la));
+    }
+    order
+}
+
+/// The box of a leaf (at least one triangle): a lone triangle's own frame, else the axes of the
+/// fit rule (for the vertex covariance, from the moments the parent summed).
+fn leaf_obb(items: &[Item], axes: Option<DMat3>, fit: FitMethod) -> Obb {
+    if let [t] = items {
+        if let Some(obb) = triangle_obb(&t.triangle()) {
+            return obb;
+        }
+    }
+    match axes {
+        Some(axes) => Obb::from_point_iter_with_axes(items.iter().flat_map(|t| t.v), axes),
+        None => fit_obb(&items.iter().map(Item::triangle).collect::<Vec<_>>(), fit),
+    }
+}
+
+/// Sums over a node's triangles, gathered by its parent's pass: the vertices' first and second
+/// moments about a reference point `r` near the node (the parent's mean), from which the
+/// node's mean (the split point) and covariance follow without another pass.
 #[derive(Clone, Copy, Debug)]
 struct Moments {
     centroids: DVec3,
@@ -101,20 +242,20 @@ impl Moments {
         }
     }
 
-    /// The moments of `tris` about `r`.
-    fn of(tris: &[Triangle], r: DVec3) -> Self {
+    /// The moments of `items` about `r`.
+    fn of(items: &[Item], r: DVec3) -> Self {
         let mut m = Self::new(r);
-        for t in tris {
-            m.add(t, t.centroid());
+        for t in items {
+            m.add(&t.v, t.triangle().centroid());
         }
         m
     }
 
     #[inline(always)]
-    fn add(&mut self, t: &Triangle, centroid: DVec3) {
+    fn add(&mut self, v: &[DVec3; 3], centroid: DVec3) {
         self.centroids += centroid;
-        for p in t.v {
-            let d = p - self.r;
+        for p in v {
+            let d = *p - self.r;
             self.first += d;
             self.second[0] += d.x * d.x;
             self.second[1] += d.x * d.y;
@@ -123,6 +264,25 @@ impl Moments {
             self.second[4] += d.y * d.z;
             self.second[5] += d.z * d.z;
         }
+    }
+
+    /// The vertex-covariance axes of the node `items` these moments were summed over (from
+    /// the moments; from a second pass when they are too far from the reference point), or
+    /// `None` where the node will not need them: a lone triangle (a leaf in its own frame) and
+    /// other fit rules (the node fits itself).
+    fn axes(&self, items: &[Item], fit: FitMethod) -> Option<DMat3> {
+        if fit != FitMethod::VertexCovariance || items.len() < 2 {
+            return None;
+        }
+        let cov = self
+            .covariance(items.len())
+            .unwrap_or_else(|| vertex_covariance(items, self.mean(items.len())));
+        Some(symmetric_eigen_axes(cov))
+    }
+
+    /// The mean of the `count` triangles' vertices (also the mean of their centroids).
+    fn mean(&self, count: usize) -> DVec3 {
+        self.centroids / count as f64
     }
 
     /// The vertices' covariance `Σ d dᵀ / 3n − m mᵀ` (`m` the mean of `d`), or `None` where the
@@ -162,9 +322,9 @@ fn magnitude(t: &Triangle) -> f64 {
 
 /// The covariance of the triangles' vertices about `mean` (their mean: the mean of the
 /// centroids), centred so large offsets cost no precision.
-fn vertex_covariance(tris: &[Triangle], mean: DVec3) -> DMat3 {
+fn vertex_covariance(items: &[Item], mean: DVec3) -> DMat3 {
     let mut c = [0.0f64; 6];
-    for t in tris {
+    for t in items {
         for p in t.v {
             let d = p - mean;
             c[0] += d.x * d.x;
@@ -175,7 +335,7 @@ fn vertex_covariance(tris: &[Triangle], mean: DVec3) -> DMat3 {
             c[5] += d.z * d.z;
         }
     }
-    let c = c.map(|x| x / (3 * tris.len()) as f64);
+    let c = c.map(|x| x / (3 * items.len()) as f64);
     DMat3::from_cols(
         DVec3::new(c[0], c[1], c[2]),
         DVec3::new(c[1], c[3], c[4]),
@@ -183,19 +343,20 @@ fn vertex_covariance(tris: &[Triangle], mean: DVec3) -> DMat3 {
     )
 }
 
-/// One pass over a node's triangles (at least two): its box with the given axes (exactly
+/// One pass over a node's triangles `src` (at least two): its box with the given axes (exactly
 /// [`Obb::from_points_with_axes`] over their vertices) and a partition about the plane through
-/// `mean` across the major axis, summing each side's [`Moments`] about `mean`. Returns the box,
-/// the size of the left part (in `1..len`) and the two sides' moments. The other two axes are
-/// tried when one side would be empty, and the list is halved when all three fail.
+/// `mean` across the major axis, written to `dst` (the left part first, the right part from the
+/// back), summing each side's [`Moments`] about `mean`. Returns the box, the size of the left
+/// part (in `1..len`) and the two sides' moments. The other two axes are tried when one side
+/// would be empty, and the list is halved when all three fail.
 fn box_and_split(
     axes: DMat3,
     mean: DVec3,
-    order: &mut [u32],
-    tris: &mut [Triangle],
-    mags: &mut [f64],
+    src: &[Item],
+    dst: &mut [Item],
 ) -> (Obb, usize, [Moments; 2]) {
-    let len = tris.len();
+    let len = src.len();
+    debug_assert_eq!(len, dst.len());
     let t = axes.transpose();
     let axis = axes.x_axis;
     let cut = axis.dot(mean);
@@ -203,36 +364,32 @@ fn box_and_split(
     let mut hi = DVec3::splat(f64::NEG_INFINITY);
     let mut mag = 0.0f64;
     let mut sums = [Moments::new(mean); 2];
-    // Hoare-style partition (`< cut` left): every triangle is looked at exactly once, at `i`.
-    let (mut i, mut j) = (0, len);
-    while i < j {
-        let tri = tris[i];
-        for p in tri.v {
+    // Branchless: each triangle goes to `dst[l]` (left) or `dst[r - 1]` (right).
+    let (mut l, mut r) = (0usize, len);
+    for item in src {
+        let [a, b, c] = item.v;
+        for p in [a, b, c] {
             let q = t * p;
             lo = lo.min(q);
             hi = hi.max(q);
         }
-        mag = mag.max(mags[i]);
-        let c = tri.centroid();
-        let right = axis.dot(c) >= cut;
-        sums[right as usize].add(&tri, c);
-        if !right {
-            i += 1;
-        } else {
-            j -= 1;
-            order.swap(i, j);
-            tris.swap(i, j);
-            mags.swap(i, j);
-        }
+        mag = mag.max(item.mag);
+        let centroid = (a + b + c) / 3.0;
+        let right = axis.dot(centroid) >= cut;
+        sums[right as usize].add(&item.v, centroid);
+        let k = if right { r - 1 } else { l };
+        dst[k] = *item;
+        l += (!right) as usize;
+        r -= right as usize;
     }
     let obb = Obb::from_projection_bounds(axes, lo, hi, mag);
-    if i > 0 && i < len {
-        return (obb, i, sums);
+    if l > 0 && l < len {
+        return (obb, l, sums);
     }
-    let mid = split_fallback(&axes, mean, order, tris, mags);
+    let mid = split_fallback(&axes, mean, dst);
     let sums = [
-        Moments::of(&tris[..mid], mean),
-        Moments::of(&tris[mid..], mean),
+        Moments::of(&dst[..mid], mean),
+        Moments::of(&dst[mid..], mean),
     ];
     (obb, mid, sums)
 }
@@ -256,27 +413,19 @@ fn triangle_obb(t: &Triangle) -> Option<Obb> {
 }
 
 /// [`box_and_split`]'s partition when the major axis leaves one side empty: the other two axes,
-/// then halving. Returns the size of the left part (in `1..len`).
-fn split_fallback(
-    obb_axes: &DMat3,
-    mean: DVec3,
-    order: &mut [u32],
-    tris: &mut [Triangle],
-    mags: &mut [f64],
-) -> usize {
-    let len = order.len();
+/// then halving, in place. Returns the size of the left part (in `1..len`).
+fn split_fallback(obb_axes: &DMat3, mean: DVec3, items: &mut [Item]) -> usize {
+    let len = items.len();
     for axis in [obb_axes.y_axis, obb_axes.z_axis] {
         let cut = axis.dot(mean);
         let mut i = 0;
         let mut j = len;
         while i < j {
-            if axis.dot(tris[i].centroid()) < cut {
+            if axis.dot(items[i].triangle().centroid()) < cut {
                 i += 1;
             } else {
                 j -= 1;
-                order.swap(i, j);
-                tris.swap(i, j);
-                mags.swap(i, j);
+                items.swap(i, j);
             }
         }
         if i > 0 && i < len {
@@ -453,16 +602,45 @@ mod tests {
         }
     }
 
+    #[test]
+    fn compact_build_equals_the_converted_f64_build() {
+        for (name, mesh) in meshes() {
+            for fit in [FitMethod::VertexCovariance, FitMethod::AreaWeighted] {
+                for leaf in [1, 2, 5] {
+                    let options = BuildOptions {
+                        fit,
+                        max_leaf_triangles: leaf,
+                    };
+                    let (nodes, order) = build_nodes(&mesh, &options);
+                    let (want_nodes, want_ends) = crate::nodes::compact(&nodes, order.len());
+                    let (got_nodes, got_order, got_ends) = build_compact(&mesh, &options);
+                    assert_eq!(got_order, order, "{name} {fit:?} {leaf}");
+                    assert_eq!(got_nodes, want_nodes, "{name} {fit:?} {leaf}");
+                    assert_eq!(got_ends, want_ends, "{name} {fit:?} {leaf}");
+                }
+            }
+        }
+    }
+
     /// The old build (a fit per node, then a separate split pass): the fused build must give
     /// trees as tight (total box surface within a few percent).
     fn reference_surface(mesh: &TriMesh) -> f64 {
-        let mut tris: Vec<Triangle> = mesh.triangles().collect();
-        let mut order: Vec<u32> = (0..tris.len() as u32).collect();
+        let mut items: Vec<Item> = mesh
+            .triangles()
+            .enumerate()
+            .map(|(i, t)| Item {
+                v: t.v,
+                mag: magnitude(&t),
+                id: i as u32,
+            })
+            .collect();
+        let mut scratch = items.clone();
         let mut total = 0.0;
-        let mut stack = vec![(0, tris.len())];
+        let mut stack = vec![(0, items.len())];
         while let Some((lo, hi)) = stack.pop() {
-            let obb = fit_obb(&tris[lo..hi], FitMethod::VertexCovariance);
-            let obb = match &tris[lo..hi] {
+            let tris: Vec<Triangle> = items[lo..hi].iter().map(Item::triangle).collect();
+            let obb = fit_obb(&tris, FitMethod::VertexCovariance);
+            let obb = match &tris[..] {
                 [t] => triangle_obb(t).unwrap_or(obb),
                 _ => obb,
             };
@@ -470,16 +648,9 @@ mod tests {
             if hi - lo <= 1 {
                 continue;
             }
-            let mean =
-                tris[lo..hi].iter().map(Triangle::centroid).sum::<DVec3>() / (hi - lo) as f64;
-            let mut mags: Vec<f64> = tris[lo..hi].iter().map(magnitude).collect();
-            let (_, mid, _) = box_and_split(
-                obb.axes,
-                mean,
-                &mut order[lo..hi],
-                &mut tris[lo..hi],
-                &mut mags,
-            );
+            let mean = tris.iter().map(Triangle::centroid).sum::<DVec3>() / (hi - lo) as f64;
+            let (_, mid, _) = box_and_split(obb.axes, mean, &items[lo..hi], &mut scratch[lo..hi]);
+            items[lo..hi].copy_from_slice(&scratch[lo..hi]);
             stack.push((lo, lo + mid));
             stack.push((lo + mid, hi));
         }

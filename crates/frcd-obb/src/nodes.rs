@@ -35,7 +35,6 @@
 //! bound on the gap. Net effect: no box pair the exact f64 test would keep is ever culled, and
 //! the boxes are larger than the f64 ones by about `4·10⁻⁶` of their size.
 
-use crate::tree::Node;
 use frcd_geom::{DMat3, DVec3, Obb};
 
 /// Bound on `|UᵀU − I|` (entrywise) accepted for a node's f32 axes.
@@ -184,8 +183,10 @@ pub(crate) fn compact_box(obb: &Obb) -> ([f32; 3], [f32; 3], [[f32; 3]; 3]) {
 }
 
 /// Converts the build's f64 nodes into traversal nodes and the leaf-end bits (bit `k` set when
-/// leaf-order entry `k` is the last of its leaf).
-pub(crate) fn compact(nodes: &[Node], order_len: usize) -> (Vec<TNode>, Vec<u64>) {
+/// leaf-order entry `k` is the last of its leaf). The build writes this layout directly
+/// (`build::build_compact`); this is the reference its test compares with.
+#[cfg(test)]
+pub(crate) fn compact(nodes: &[crate::tree::Node], order_len: usize) -> (Vec<TNode>, Vec<u64>) {
     let mut ends = vec![0u64; order_len.div_ceil(64).max(1)];
     let out = nodes
         .iter()

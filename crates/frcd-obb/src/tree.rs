@@ -124,15 +124,9 @@ impl ObbTree {
     /// assert_eq!(tree.triangle(7), mesh.triangle(7));
     /// ```
     pub fn build_shared(mesh: Arc<TriMesh>, options: &BuildOptions) -> ObbTree {
-        let (nodes, order) = build_nodes(&mesh, options);
-        ObbTree::assemble(mesh, &nodes, order)
-    }
-
-    /// The tree from the build's output: the f64 nodes converted to the compact traversal
-    /// layout (`nodes.rs`), and the whole-mesh volumes.
-    fn assemble(mesh: Arc<TriMesh>, nodes: &[Node], order: Vec<u32>) -> Self {
-        let (nodes, ends) = nodes::compact(nodes, order.len());
-        Self::from_compact(mesh, nodes, order, ends)
+        // The build writes the compact traversal layout (`nodes.rs`) directly.
+        let (nodes, order, ends) = crate::build::build_compact(&mesh, options);
+        ObbTree::from_compact(mesh, nodes, order, ends)
     }
 
     /// The tree from compact nodes, the leaf order and its end bits (checked by the caller).
@@ -160,12 +154,6 @@ impl ObbTree {
             distance_volumes: std::sync::OnceLock::new(),
         }
     }
-}
-
-/// The build proper: depth-first f64 nodes (node 0 the root) and the leaf order of the mesh's
-/// triangles.
-fn build_nodes(mesh: &TriMesh, options: &BuildOptions) -> (Vec<Node>, Vec<u32>) {
-    crate::build::build_nodes(mesh, options)
 }
 
 impl ObbTree {

@@ -16,6 +16,7 @@ use broad::BroadPhase;
 use frcd_geom::{Aabb, DVec3, Pose};
 use std::collections::BTreeMap;
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 /// Why a [`World`] call was refused.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -162,6 +163,9 @@ struct PairState {
     clearance_cache: ClearanceCache,
     /// Work of the last clearance evaluation.
     clearance_work: ClearanceWork,
+    /// Time the last evaluation took, in nanoseconds (`u64::MAX` before the first): the
+    /// estimate by which the next step orders the pairs, largest first.
+    cost_ns: u64,
 }
 
 impl PairState {
@@ -176,6 +180,7 @@ impl PairState {
             cache: PairCache::new(),
             clearance_cache: ClearanceCache::new(),
             clearance_work: ClearanceWork::default(),
+            cost_ns: u64::MAX,
         }
     }
 }
@@ -187,7 +192,32 @@ struct PairEntry {
     /// The raw world boxes overlap: the collision query runs.
     overlap: bool,
     threshold: Option<f64>,
-    state: PairState,
+    /// Answered from the previous step (set by [`World::step`] before the narrow phase).
+    reused: bool,
+    /// Boxed: the merge of each step moves the entries, and the state is most of their size.
+    state: Box<PairState>,
+}
+
+/// Where the time of the last [`World::step`] went (wall-clock time on the calling thread, and
+/// the narrow phase's work summed over the pairs it evaluated): for tuning and for judging how
+/// well a thread pool is used. [`World::last_step_timing`].
+///
+/// The narrow phase's parallel efficiency is `pair_time / (threads · narrow)`; what it loses
+/// is idle time (a thread waiting for the last pairs of another) and scheduling overhead.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StepTiming {
+    /// The broad phase and the merge of last step's pair states (sequential).
+    pub broad: Duration,
+    /// The narrow phase: wall time from dispatching the pairs to the last answer.
+    pub narrow: Duration,
+    /// Collecting the answers and the statistics (sequential).
+    pub collect: Duration,
+    /// Sum over the pairs evaluated of the time each took (on whichever thread ran it).
+    pub pair_time: Duration,
+    /// The longest single pair evaluation.
+    pub max_pair: Duration,
+    /// Threads of the pool the narrow phase ran on (1 without the `parallel` feature).
+    pub threads: usize,
 }
 
 #[derive(Debug, Default)]
@@ -243,6 +273,8 @@ pub struct World {
     broad: BroadPhase,
     /// Candidate pairs of the last step with their states, sorted by `(a.index, b.index)`.
     pairs: Vec<PairEntry>,
+    /// An empty list whose allocation the next step reuses for its pairs.
+    spare: Vec<PairEntry>,
     /// Indices into `pairs` of the interfering pairs of the last step.
     contacts: Vec<u32>,
     clearances: Vec<Clearance>,
@@ -252,6 +284,7 @@ pub struct World {
     /// values), for the broad phase's margin.
     thresholds: BTreeMap<u64, usize>,
     stats: StepStats,
+    timing: StepTiming,
     #[cfg(feature = "parallel")]
     pool: Option<Arc<rayon::ThreadPool>>,
 }
@@ -275,11 +308,13 @@ impl World {
             live: 0,
             broad: BroadPhase::default(),
             pairs: Vec::new(),
+            spare: Vec::new(),
             contacts: Vec::new(),
             clearances: Vec::new(),
             clearance: None,
             thresholds: BTreeMap::new(),
             stats: StepStats::default(),
+            timing: StepTiming::default(),
             #[cfg(feature = "parallel")]
             pool: None,
         }
@@ -625,13 +660,22 @@ impl World {
 
     /// Advances one step: broad phase, then the narrow phase on the candidate pairs whose poses
     /// changed since their last answer. The report borrows the world.
+    ///
+    /// The narrow phase hands the pairs to the pool's threads one at a time, the costliest
+    /// first (by the time each took last step; new pairs first of all), so that no thread is
+    /// left with a long pair while the others idle at the end of the step. The answers do not
+    /// depend on that order or on the thread count.
     pub fn step(&mut self) -> StepReport<'_> {
+        let t_start = Instant::now();
         let margin = self.max_clearance().unwrap_or(0.0);
         let cands = self.overlapping_pairs(margin);
-        // Merge last step's states (sorted like `cands`) into this step's work list.
-        let old = std::mem::take(&mut self.pairs);
-        let mut old = old.into_iter().peekable();
-        let mut work: Vec<PairEntry> = Vec::with_capacity(cands.len());
+        // Merge last step's states (sorted like `cands`) into this step's work list (both
+        // allocations are kept from step to step).
+        let mut old_pairs = std::mem::take(&mut self.pairs);
+        let mut old = old_pairs.drain(..).peekable();
+        let mut work: Vec<PairEntry> = std::mem::take(&mut self.spare);
+        work.clear();
+        work.reserve(cands.len());
         for (a, b) in cands {
             let (ba, bb) = (self.slot_body(a.index()), self.slot_body(b.index()));
             let overlap = ba.aabb.intersects(&bb.aabb);
@@ -657,26 +701,31 @@ impl World {
                     break;
                 }
             }
+            let state = state.unwrap_or_else(|| Box::new(PairState::new()));
+            // Neither pose changed since the last answer (same threshold): reuse it.
+            let reused = state.answered
+                && state.versions == (ba.version, bb.version)
+                && state.threshold == threshold;
             work.push(PairEntry {
                 a,
                 b,
                 overlap,
                 threshold,
-                state: state.unwrap_or_else(PairState::new),
+                reused,
+                state,
             });
         }
         drop(old);
+        self.spare = old_pairs;
         let slots = &self.slots;
         let options = self.options;
-        let run = |e: &mut PairEntry| -> bool {
+        let run = |e: &mut PairEntry| {
+            let t = Instant::now();
             let ba = slots[e.a.index() as usize].body.as_ref().expect("live");
             let bb = slots[e.b.index() as usize].body.as_ref().expect("live");
             let st = &mut e.state;
             let versions = (ba.version, bb.version);
             let epochs = (ba.epoch, bb.epoch);
-            if st.answered && st.versions == versions && st.threshold == e.threshold {
-                return true;
-            }
             if !options.coherence || st.epochs != epochs {
                 st.cache.clear();
             }
@@ -713,32 +762,58 @@ impl World {
             st.epochs = epochs;
             st.threshold = e.threshold;
             st.answered = true;
-            false
+            st.cost_ns = (t.elapsed().as_nanos() as u64).min(u64::MAX - 1);
         };
+        // The pairs to evaluate, costliest first.
+        let mut jobs: Vec<(u64, &mut PairEntry)> = work
+            .iter_mut()
+            .filter(|e| !e.reused)
+            .map(|e| (e.state.cost_ns, e))
+            .collect();
+        jobs.sort_unstable_by_key(|x| std::cmp::Reverse(x.0));
+        let t_narrow = Instant::now();
         #[cfg(feature = "parallel")]
-        let reused: Vec<bool> = {
-            use rayon::prelude::*;
+        let threads = {
+            use rayon::iter::{ParallelBridge, ParallelIterator};
+            // `par_bridge` gives each thread the next pair of the list as it becomes free
+            // (greedy list scheduling in cost order); one lock per pair, microseconds of
+            // work each.
+            let each = |jobs: Vec<(u64, &mut PairEntry)>| {
+                if rayon::current_num_threads() > 1 {
+                    jobs.into_iter().par_bridge().for_each(|(_, e)| run(e));
+                } else {
+                    jobs.into_iter().for_each(|(_, e)| run(e));
+                }
+                rayon::current_num_threads()
+            };
             match &self.pool {
-                Some(pool) => pool.install(|| work.par_iter_mut().map(run).collect()),
-                None => work.par_iter_mut().map(run).collect(),
+                Some(pool) => pool.install(|| each(jobs)),
+                None => each(jobs),
             }
         };
         #[cfg(not(feature = "parallel"))]
-        let reused: Vec<bool> = work.iter_mut().map(run).collect();
+        let threads = {
+            jobs.into_iter().for_each(|(_, e)| run(e));
+            1
+        };
+        let t_collect = Instant::now();
         let mut stats = StepStats {
             candidates: work.len(),
             ..StepStats::default()
         };
+        let (mut pair_time, mut max_pair) = (0u64, 0u64);
         self.contacts.clear();
         self.clearances.clear();
-        for (i, (e, reused)) in work.iter().zip(reused).enumerate() {
-            if reused {
+        for (i, e) in work.iter().enumerate() {
+            if e.reused {
                 stats.reused += 1;
             } else {
                 stats.clearance_work += e.state.clearance_work;
+                pair_time += e.state.cost_ns;
+                max_pair = max_pair.max(e.state.cost_ns);
             }
             if let Some(c) = &e.state.result {
-                if !reused {
+                if !e.reused {
                     stats.counters += c.counters;
                 }
                 if c.collide {
@@ -751,7 +826,36 @@ impl World {
         }
         self.pairs = work;
         self.stats = stats;
+        let t_end = Instant::now();
+        self.timing = StepTiming {
+            broad: t_narrow - t_start,
+            narrow: t_collect - t_narrow,
+            collect: t_end - t_collect,
+            pair_time: Duration::from_nanos(pair_time),
+            max_pair: Duration::from_nanos(max_pair),
+            threads,
+        };
         self.last_step()
+    }
+
+    /// Where the time of the last [`World::step`] went ([`StepTiming`]; all zero before the
+    /// first step).
+    ///
+    /// ```
+    /// use frcd_obb::{BuildOptions, ObbTree, World, WorldOptions};
+    /// use frcd_geom::{shapes, DVec3, Pose};
+    /// use std::sync::Arc;
+    /// let ball = Arc::new(ObbTree::build(&shapes::icosphere(1.0, 2), &BuildOptions::default()));
+    /// let mut world = World::new(WorldOptions::default());
+    /// world.add_body(ball.clone(), Pose::IDENTITY, false)?;
+    /// world.add_body(ball, Pose::from_translation(DVec3::new(1.5, 0.0, 0.0)), false)?;
+    /// world.step();
+    /// let t = world.last_step_timing();
+    /// assert!(t.threads >= 1 && t.max_pair <= t.pair_time);
+    /// # Ok::<(), frcd_obb::WorldError>(())
+    /// ```
+    pub fn last_step_timing(&self) -> StepTiming {
+        self.timing
     }
 
     /// The report of the last [`World::step`] again (empty before the first).
