@@ -9,7 +9,7 @@ use crate::gpu::Image;
 use crate::report::{PairClearance, PairContact, Stage, StageBackend, StageReport, Via};
 use crate::{Accuracy, Backend, BodySpec, FrameResult, FrameState, HybridError, Options};
 use frcd_geom::{Pose, TriMesh};
-use frcd_obb::{ObbTree, World, WorldOptions};
+use frcd_obb::{ObbTree, SpinProfile, World, WorldOptions};
 use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
@@ -39,6 +39,9 @@ pub struct Checker {
     /// Per mesh, the tree of the clearance searches (`trees` unless
     /// [`Options::clearance_build`] asks for others).
     pub(crate) clearance_trees: Vec<Arc<ObbTree>>,
+    /// Per mesh, its meridian profile when it is a solid of revolution and
+    /// [`Options::clearance_spin`] asks for them.
+    pub(crate) clearance_spins: Vec<Option<Arc<SpinProfile>>>,
     pub(crate) excluded: HashSet<(u32, u32)>,
     pub(crate) options: Options,
     pub(crate) notes: Vec<String>,
@@ -124,6 +127,15 @@ impl Checker {
                 .collect(),
             _ => trees.clone(),
         };
+        let clearance_spins: Vec<Option<Arc<SpinProfile>>> =
+            if wants_clearance && options.clearance_spin {
+                clearance_trees
+                    .par_iter()
+                    .map(|t| SpinProfile::detect(t).map(Arc::new))
+                    .collect()
+            } else {
+                vec![None; clearance_trees.len()]
+            };
         #[allow(unused_mut)]
         let mut checker = Checker {
             serial: NEXT_SERIAL.fetch_add(1, Ordering::Relaxed),
@@ -132,6 +144,7 @@ impl Checker {
             meshes,
             trees,
             clearance_trees,
+            clearance_spins,
             excluded,
             options,
             notes: Vec::new(),

@@ -97,14 +97,19 @@ impl Checker {
         };
         let mut outcome = outcome;
         if let Some(t) = job.threshold {
-            (outcome.clearance, job.clearance_work) = frcd_obb::pair_clearance_cached(
-                &self.clearance_trees[self.bodies[ia].mesh],
+            let (ma, mb) = (self.bodies[ia].mesh, self.bodies[ib].mesh);
+            (outcome.clearance, job.clearance_work) = frcd_obb::pair_clearance_spin(
+                &self.clearance_trees[ma],
                 pa,
-                &self.clearance_trees[self.bodies[ib].mesh],
+                &self.clearance_trees[mb],
                 pb,
                 t,
                 outcome.pairs.first().copied(),
                 outcome.collide(),
+                [
+                    self.clearance_spins[ma].as_deref(),
+                    self.clearance_spins[mb].as_deref(),
+                ],
                 &mut job.state.clearance,
             );
         }

@@ -45,6 +45,6 @@ pub use query::{
 pub use saved::{LoadError, SavedTree};
 pub use tree::{BuildOptions, Node, ObbTree};
 pub use world::{
-    BodyContact, BodyId, Clearance, ClearanceCache, ClearanceWork, StepReport, World, WorldError,
-    WorldOptions, pair_clearance, pair_clearance_cached,
+    BodyContact, BodyId, Clearance, ClearanceCache, ClearanceWork, SpinProfile, StepReport, World,
+    WorldError, WorldOptions, pair_clearance, pair_clearance_cached, pair_clearance_spin,
 };

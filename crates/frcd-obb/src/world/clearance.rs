@@ -29,6 +29,9 @@
 //! triangle-pair distance below the limit, as without the cache (on exact ties another triangle
 //! pair of the same distance may be named).
 
+#[path = "clearance_spin.rs"]
+mod spin;
+
 use super::BodyId;
 use crate::distance::{
     Distance, DistanceCache, DistanceRequest, distance_below, distance_cached, error_bound, within,
@@ -37,6 +40,7 @@ use crate::query::RelativeFrame;
 use crate::tree::ObbTree;
 use frcd_geom::{DMat3, DVec3, Pose};
 use frcd_tritri::Contact;
+pub use spin::SpinProfile;
 
 /// Factor from [`Distance::error_bound`] (well-conditioned features) to a bound that holds for
 /// every feature pair: `2²⁸·64ε = 2⁻¹⁹` relative to the scene magnitude, against the
@@ -87,21 +91,32 @@ pub struct ClearanceWork {
     pub pairs: u64,
     /// Pairs proved farther than their threshold by the motion bound: no query.
     pub skipped: u64,
+    /// Pairs proved farther than their threshold by the meridian bound of a body turning about
+    /// its own axis ([`SpinProfile`], [`pair_clearance_spin`]): no query.
+    pub spin_skipped: u64,
     /// Distance searches run.
     pub distance_queries: u64,
     /// Searches seeded with the previous answer's triangle pair.
     pub warm_starts: u64,
     /// Exact [`within`] decisions (a distance within its error band of the threshold).
     pub exact_decisions: u64,
+    /// Node-pair lower bounds computed by the distance searches (a time-free measure of their
+    /// work).
+    pub box_tests: u64,
+    /// Triangle pairs evaluated by the distance searches.
+    pub tri_tests: u64,
 }
 
 impl std::ops::AddAssign for ClearanceWork {
     fn add_assign(&mut self, o: Self) {
         self.pairs += o.pairs;
         self.skipped += o.skipped;
+        self.spin_skipped += o.spin_skipped;
         self.distance_queries += o.distance_queries;
         self.warm_starts += o.warm_starts;
         self.exact_decisions += o.exact_decisions;
+        self.box_tests += o.box_tests;
+        self.tri_tests += o.tri_tests;
     }
 }
 
@@ -226,6 +241,54 @@ pub fn pair_clearance_cached(
     interfering: bool,
     cache: &mut ClearanceCache,
 ) -> (Option<Clearance<()>>, ClearanceWork) {
+    pair_clearance_spin(
+        a,
+        pose_a,
+        b,
+        pose_b,
+        threshold,
+        witness,
+        interfering,
+        [None, None],
+        cache,
+    )
+}
+
+/// [`pair_clearance_cached`] that also uses the meridian bound of A's and B's [`SpinProfile`]
+/// (`spins[0]` for A, `spins[1]` for B; a profile built for another tree is ignored): a pair
+/// that the motion bound cannot skip is proved farther than its threshold without a distance
+/// query when its meridian images are that far apart, whatever angle the body with the
+/// profile has turned to (see [`SpinProfile`]). The answers are those of [`pair_clearance`].
+///
+/// ```
+/// use frcd_obb::{BuildOptions, ClearanceCache, ObbTree, SpinProfile, pair_clearance, pair_clearance_spin};
+/// use frcd_geom::{shapes, DQuat, DVec3, Pose};
+/// let opts = BuildOptions { max_leaf_triangles: 1, ..BuildOptions::default() };
+/// let wheel = ObbTree::build(&shapes::cylinder(0.46, 0.07, 64, 1).unwrap(), &opts);
+/// let block = ObbTree::build(&shapes::cuboid(DVec3::new(0.05, 0.05, 0.05)), &opts);
+/// let spin = SpinProfile::detect(&wheel).unwrap();
+/// let mut cache = ClearanceCache::new();
+/// let pb = Pose::from_translation(DVec3::new(0.53, 0.0, 0.0)); // 20 mm off the wheel
+/// for k in 0..10 {
+///     // The wheel turns 0.054 rad a frame: its rim moves 25 mm, more than the gap.
+///     let pa = Pose::from_rotation(DQuat::from_rotation_z(0.054 * k as f64));
+///     let (c, work) = pair_clearance_spin(&wheel, &pa, &block, &pb, 0.005, None, false, [Some(&spin), None], &mut cache);
+///     assert_eq!(c, pair_clearance(&wheel, &pa, &block, &pb, 0.005, None, false));
+///     assert_eq!((work.spin_skipped, work.distance_queries), (1, 0));
+/// }
+/// ```
+#[allow(clippy::too_many_arguments)]
+pub fn pair_clearance_spin(
+    a: &ObbTree,
+    pose_a: &Pose,
+    b: &ObbTree,
+    pose_b: &Pose,
+    threshold: f64,
+    witness: Option<(u32, u32)>,
+    interfering: bool,
+    spins: [Option<&SpinProfile>; 2],
+    cache: &mut ClearanceCache,
+) -> (Option<Clearance<()>>, ClearanceWork) {
     let mut work = ClearanceWork {
         pairs: 1,
         ..ClearanceWork::default()
@@ -294,6 +357,17 @@ pub fn pair_clearance_cached(
         let motion = motion_bound(&c.m, c.t, &frame, radius);
         if c.lower > (threshold + motion) * (1.0 + 1e-15) {
             work.skipped += 1;
+            return (None, work);
+        }
+    }
+    // The meridian bound: every point pair farther than the threshold at any angle the
+    // profiled body has turned to about its axis.
+    for (k, s) in spins.iter().enumerate() {
+        let Some(s) = s.filter(|s| s.is_for(if k == 0 { a } else { b })) else {
+            continue;
+        };
+        if spin::pair_proved_far(s, k == 0, a, b, &frame, threshold).0 {
+            work.spin_skipped += 1;
             return (None, work);
         }
     }
@@ -396,5 +470,9 @@ fn search(
         distance_below(a, pose_a, b, pose_b, &r, limit)
     };
     cache.near = d.is_some();
+    if let Some(d) = &d {
+        work.box_tests += d.counters.box_tests;
+        work.tri_tests += d.counters.tri_tests;
+    }
     d
 }
