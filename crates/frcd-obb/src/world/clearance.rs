@@ -271,7 +271,7 @@ pub fn pair_clearance_cached(
 /// let pb = Pose::from_translation(DVec3::new(0.53, 0.0, 0.0)); // 20 mm off the wheel
 /// for k in 0..10 {
 ///     // The wheel turns 0.054 rad a frame: its rim moves 25 mm, more than the gap.
-///     let pa = Pose::from_rotation(DQuat::from_rotation_z(0.054 * k as f64));
+///     let pa = Pose::new(DVec3::ZERO, DQuat::from_rotation_z(0.054 * k as f64));
 ///     let (c, work) = pair_clearance_spin(&wheel, &pa, &block, &pb, 0.005, None, false, [Some(&spin), None], &mut cache);
 ///     assert_eq!(c, pair_clearance(&wheel, &pa, &block, &pb, 0.005, None, false));
 ///     assert_eq!((work.spin_skipped, work.distance_queries), (1, 0));

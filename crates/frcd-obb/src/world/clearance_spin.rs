@@ -150,7 +150,18 @@ impl SpinProfile {
         if boxes.is_empty() || boxes.iter().any(|b| !(b.r1.is_finite() && b.z1.is_finite())) {
             return None;
         }
-        // Triangles of one ring of a solid of revolution share (nearly) one box: keep one.
+        // Triangles of one ring of a solid of revolution share one box up to rounding: grow
+        // each box outward to a grid of `1e-9 M` (it still holds its triangle's image) and
+        // keep one of each.
+        let q = SLACK_REL * p.magnitude.max(f64::MIN_POSITIVE);
+        for b in &mut boxes {
+            *b = MBox {
+                r0: ((b.r0 / q).floor() * q).max(0.0),
+                r1: (b.r1 / q).ceil() * q,
+                z0: (b.z0 / q).floor() * q,
+                z1: (b.z1 / q).ceil() * q,
+            };
+        }
         boxes.sort_unstable_by(|x, y| {
             (x.z0, x.r0, x.z1, x.r1)
                 .partial_cmp(&(y.z0, y.r0, y.z1, y.r1))
