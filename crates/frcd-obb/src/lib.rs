@@ -46,5 +46,6 @@ pub use saved::{LoadError, SavedTree};
 pub use tree::{BuildOptions, Node, ObbTree};
 pub use world::{
     BodyContact, BodyId, Clearance, ClearanceCache, ClearanceWork, SpinProfile, StepReport, World,
-    WorldError, WorldOptions, pair_clearance, pair_clearance_cached, pair_clearance_spin,
+    WorldError, WorldOptions, containment, pair_clearance, pair_clearance_apart,
+    pair_clearance_cached, pair_clearance_spin,
 };

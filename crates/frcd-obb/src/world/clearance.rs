@@ -296,11 +296,7 @@ pub fn pair_clearance_spin(
     let frame = RelativeFrame::new(pose_a, pose_b);
     let radius = b.radius_from_origin * (1.0 + 1e-12);
     // How far B moved since the last call: sizes the look-ahead below.
-    cache.step = match &cache.last {
-        Some((m, t)) => motion_bound(m, *t, &frame, radius),
-        None => f64::INFINITY,
-    };
-    cache.last = Some((frame.m, frame.t));
+    update_step(cache, &frame, radius);
     if interfering {
         cache.cert = None;
         cache.near = true;
@@ -349,15 +345,116 @@ pub fn pair_clearance_spin(
             work,
         );
     }
+    let (answer, _) = evaluate(
+        a, pose_a, b, pose_b, &frame, radius, threshold, spins, cache, &mut work,
+    );
+    (answer, work)
+}
+
+/// [`pair_clearance_spin`] before the collision query, for a pair that may not interfere:
+/// `Some(answer)` when this evaluation proves the two surfaces apart (every point pair of the
+/// f64 inputs farther than 0: then no triangle pair touches, and the collision query has only
+/// solid-mode containment left to decide, [`containment`]), with the answer
+/// [`pair_clearance_spin`] gives for a pair that does not interfere. `None` when it cannot
+/// prove that: run the collision query, then [`pair_clearance_spin`] with its answer; this
+/// call's work then counts no pair evaluation (the second call does), its searches still
+/// count.
+///
+/// ```
+/// use frcd_obb::{BuildOptions, ClearanceCache, ObbTree, collide, containment, pair_clearance, pair_clearance_apart, Request};
+/// use frcd_geom::{shapes, DVec3, Pose};
+/// let t = ObbTree::build(&shapes::cuboid(DVec3::splat(0.5)), &BuildOptions::default());
+/// let pb = Pose::from_translation(DVec3::new(1.003, 0.0, 0.0)); // 3 mm apart
+/// let (apart, _) = pair_clearance_apart(&t, &Pose::IDENTITY, &t, &pb, 0.005, [None, None], &mut ClearanceCache::new());
+/// assert_eq!(apart, Some(pair_clearance(&t, &Pose::IDENTITY, &t, &pb, 0.005, None, false)));
+/// assert!(!collide(&t, &Pose::IDENTITY, &t, &pb, &Request::default()).collide);
+/// assert_eq!(containment(&t, &Pose::IDENTITY, &t, &pb), None);
+/// let touching = Pose::from_translation(DVec3::new(1.0, 0.0, 0.0));
+/// let (apart, work) = pair_clearance_apart(&t, &Pose::IDENTITY, &t, &touching, 0.005, [None, None], &mut ClearanceCache::new());
+/// assert_eq!((apart, work.pairs), (None, 0));
+/// ```
+#[allow(clippy::too_many_arguments)]
+pub fn pair_clearance_apart(
+    a: &ObbTree,
+    pose_a: &Pose,
+    b: &ObbTree,
+    pose_b: &Pose,
+    threshold: f64,
+    spins: [Option<&SpinProfile>; 2],
+    cache: &mut ClearanceCache,
+) -> (Option<Option<Clearance<()>>>, ClearanceWork) {
+    let mut work = ClearanceWork::default();
+    let frame = RelativeFrame::new(pose_a, pose_b);
+    let radius = b.radius_from_origin * (1.0 + 1e-12);
+    // Leave `cache.step` and `cache.last` to `pair_clearance_spin` when this cannot decide: a
+    // second update in one frame would shrink the look-ahead to nothing.
+    let last = cache.last;
+    let step = cache.step;
+    update_step(cache, &frame, radius);
+    let (answer, apart) = evaluate(
+        a, pose_a, b, pose_b, &frame, radius, threshold, spins, cache, &mut work,
+    );
+    if apart {
+        work.pairs = 1;
+        (Some(answer), work)
+    } else {
+        cache.last = last;
+        cache.step = step;
+        (None, work)
+    }
+}
+
+/// The solid-mode containment answer [`crate::collide`] gives (with [`crate::Request::solid`])
+/// for two posed trees whose surfaces do not touch: one closed mesh wholly inside the other,
+/// decided by exact point-in-mesh parity. For callers that proved the surfaces apart another
+/// way ([`pair_clearance_apart`]) and skip the collision traversal.
+pub fn containment(
+    a: &ObbTree,
+    pose_a: &Pose,
+    b: &ObbTree,
+    pose_b: &Pose,
+) -> Option<crate::Containment> {
+    crate::query::contained(a, b, &RelativeFrame::new(pose_a, pose_b), CONTAINMENT_SEED)
+}
+
+/// The ray seed [`crate::collide`] uses for its containment test.
+const CONTAINMENT_SEED: u64 = 0x5EED;
+
+/// Records the frame of this call and how far B moved since the last (sizes the look-ahead).
+fn update_step(cache: &mut ClearanceCache, frame: &RelativeFrame, radius: f64) {
+    cache.step = match &cache.last {
+        Some((m, t)) => motion_bound(m, *t, frame, radius),
+        None => f64::INFINITY,
+    };
+    cache.last = Some((frame.m, frame.t));
+}
+
+/// The evaluation of a pair that does not interfere: the answer, and whether it proved the
+/// surfaces apart (a certified lower bound above 0 on the exact distance).
+#[allow(clippy::too_many_arguments)]
+fn evaluate(
+    a: &ObbTree,
+    pose_a: &Pose,
+    b: &ObbTree,
+    pose_b: &Pose,
+    frame: &RelativeFrame,
+    radius: f64,
+    threshold: f64,
+    spins: [Option<&SpinProfile>; 2],
+    cache: &mut ClearanceCache,
+    work: &mut ClearanceWork,
+) -> (Option<Clearance<()>>, bool) {
+    let frame = *frame;
     if threshold.is_nan() || threshold < 0.0 {
-        return (None, work);
+        return (None, false);
     }
     let trees = (a.uid, b.uid);
     if let Some(c) = cache.cert.filter(|c| c.trees == trees) {
         let motion = motion_bound(&c.m, c.t, &frame, radius);
         if c.lower > (threshold + motion) * (1.0 + 1e-15) {
+            // `d* >= lower - motion > threshold >= 0`.
             work.skipped += 1;
-            return (None, work);
+            return (None, true);
         }
     }
     // The meridian bound: every point pair farther than the threshold at any angle the
@@ -367,8 +464,9 @@ pub fn pair_clearance_spin(
             continue;
         };
         if spin::pair_proved_far(s, k == 0, a, b, &frame, threshold).0 {
+            // Every point pair farther than `threshold >= 0`.
             work.spin_skipped += 1;
-            return (None, work);
+            return (None, true);
         }
     }
     let err = error_bound(a, pose_a, b, pose_b);
@@ -384,7 +482,8 @@ pub fn pair_clearance_spin(
     };
     let limit = band_top + reach;
     work.distance_queries += 1;
-    let found = search(a, pose_a, b, pose_b, &frame, limit, cache, &mut work);
+    let found = search(a, pose_a, b, pose_b, &frame, limit, cache, work);
+    let nan = found.is_some_and(|d| d.distance.is_nan());
     let Some(d) = found.filter(|d| !d.distance.is_nan()) else {
         // Every computed distance is at least `limit`: the exact one at least `limit - worst`.
         cache.cert = Some(Certificate {
@@ -393,8 +492,9 @@ pub fn pair_clearance_spin(
             t: frame.t,
             lower: lower_bound(limit, worst),
         });
-        return (None, work);
+        return (None, !nan && lower_bound(limit, worst) > 0.0);
     };
+    let apart = lower_bound(d.distance, worst) > 0.0;
     cache.cert = Some(Certificate {
         trees,
         m: frame.m,
@@ -402,7 +502,7 @@ pub fn pair_clearance_spin(
         lower: lower_bound(d.distance, worst),
     });
     if d.distance >= band_top {
-        return (None, work);
+        return (None, apart);
     }
     let inside = d.distance + d.error_bound <= threshold
         || (d.distance - worst <= threshold && {
@@ -417,7 +517,7 @@ pub fn pair_clearance_spin(
         triangles: d.triangles,
         interfering: false,
     });
-    (answer, work)
+    (answer, apart)
 }
 
 /// `x - worst`, rounded down.

@@ -147,7 +147,11 @@ impl SpinProfile {
         let mut boxes: Vec<MBox> = (0..tree.triangle_count() as u32)
             .map(|t| p.triangle_box(&tree.triangle(t).v))
             .collect();
-        if boxes.is_empty() || boxes.iter().any(|b| !(b.r1.is_finite() && b.z1.is_finite())) {
+        if boxes.is_empty()
+            || boxes
+                .iter()
+                .any(|b| !(b.r1.is_finite() && b.z1.is_finite()))
+        {
             return None;
         }
         // Triangles of one ring of a solid of revolution share one box up to rounding: grow
@@ -218,7 +222,9 @@ impl SpinProfile {
             }
         }
         let (n, u) = best?;
-        (n * 6 <= v.len()).then(|| Self::about(tree, c, u)).flatten()
+        (n * 6 <= v.len())
+            .then(|| Self::about(tree, c, u))
+            .flatten()
     }
 
     /// The axis `(point, unit direction)` in the body's local frame.
