@@ -54,22 +54,20 @@ impl Checker {
                 &self.clearance_trees[mb],
                 pb,
                 t,
+                self.options.solid,
                 spins,
                 &mut job.state.clearance,
             );
             early_work = w;
-            if let Some(answer) = apart {
-                let contained = if self.options.solid {
-                    frcd_obb::containment(ta, pa, tb, pb)
-                } else {
-                    None
-                };
+            if let Some(apart) = apart {
+                // The clearance trees hold the collision trees' meshes: the same containment.
+                let contained = apart.contained;
                 let mut outcome = Outcome {
                     pairs: Vec::new(),
                     contained,
                     segments: Vec::new(),
                     via: Via::Cpu,
-                    clearance: answer,
+                    clearance: apart.clearance,
                 };
                 job.clearance_work = early_work;
                 if contained.is_some() {

@@ -45,7 +45,7 @@ pub use query::{
 pub use saved::{LoadError, SavedTree};
 pub use tree::{BuildOptions, Node, ObbTree};
 pub use world::{
-    BodyContact, BodyId, Clearance, ClearanceCache, ClearanceWork, SpinProfile, StepReport, World,
-    WorldError, WorldOptions, containment, pair_clearance, pair_clearance_apart,
-    pair_clearance_cached, pair_clearance_spin,
+    Apart, BodyContact, BodyId, Clearance, ClearanceCache, ClearanceWork, SpinProfile, StepReport,
+    World, WorldError, WorldOptions, pair_clearance, pair_clearance_apart, pair_clearance_cached,
+    pair_clearance_spin,
 };

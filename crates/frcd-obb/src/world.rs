@@ -6,7 +6,7 @@ mod clearance;
 mod handle;
 
 pub use clearance::{
-    Clearance, ClearanceCache, ClearanceWork, SpinProfile, containment, pair_clearance,
+    Apart, Clearance, ClearanceCache, ClearanceWork, SpinProfile, pair_clearance,
     pair_clearance_apart, pair_clearance_cached, pair_clearance_spin,
 };
 pub use handle::BodyId;

@@ -351,26 +351,39 @@ pub fn pair_clearance_spin(
     (answer, work)
 }
 
+/// What [`pair_clearance_apart`] proved: the surfaces do not touch.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Apart {
+    /// The answer [`pair_clearance_spin`] gives for a pair that does not interfere (`None`:
+    /// farther than the threshold). Meaningless when `contained` is set: the pair then
+    /// interferes, and its clearance is that of an interfering pair.
+    pub clearance: Option<Clearance<()>>,
+    /// Solid-mode containment (when asked for): what [`crate::collide`] reports for these
+    /// poses when no surface pair touches.
+    pub contained: Option<crate::Containment>,
+}
+
 /// [`pair_clearance_spin`] before the collision query, for a pair that may not interfere:
-/// `Some(answer)` when this evaluation proves the two surfaces apart (every point pair of the
-/// f64 inputs farther than 0: then no triangle pair touches, and the collision query has only
-/// solid-mode containment left to decide, [`containment`]), with the answer
-/// [`pair_clearance_spin`] gives for a pair that does not interfere. `None` when it cannot
-/// prove that: run the collision query, then [`pair_clearance_spin`] with its answer; this
-/// call's work then counts no pair evaluation (the second call does), its searches still
-/// count.
+/// `Some` when this evaluation proves the two surfaces apart (a certified lower bound above 0
+/// on the exact distance of the f64 inputs, which are the exact collision test's: then no
+/// triangle pair touches, and of the collision query only solid-mode containment is left,
+/// answered here when `solid`), with the answer [`pair_clearance_spin`] gives for a pair that
+/// does not interfere. `None` when it cannot prove that: run the collision query, then
+/// [`pair_clearance_spin`] with its answer; this call's work then counts no pair evaluation
+/// (the second call does), its searches still count.
 ///
 /// ```
-/// use frcd_obb::{BuildOptions, ClearanceCache, ObbTree, collide, containment, pair_clearance, pair_clearance_apart, Request};
+/// use frcd_obb::{BuildOptions, ClearanceCache, ObbTree, collide, pair_clearance, pair_clearance_apart, Request};
 /// use frcd_geom::{shapes, DVec3, Pose};
 /// let t = ObbTree::build(&shapes::cuboid(DVec3::splat(0.5)), &BuildOptions::default());
 /// let pb = Pose::from_translation(DVec3::new(1.003, 0.0, 0.0)); // 3 mm apart
-/// let (apart, _) = pair_clearance_apart(&t, &Pose::IDENTITY, &t, &pb, 0.005, [None, None], &mut ClearanceCache::new());
-/// assert_eq!(apart, Some(pair_clearance(&t, &Pose::IDENTITY, &t, &pb, 0.005, None, false)));
+/// let (apart, _) = pair_clearance_apart(&t, &Pose::IDENTITY, &t, &pb, 0.005, true, [None, None], &mut ClearanceCache::new());
+/// let apart = apart.unwrap();
+/// assert_eq!(apart.clearance, pair_clearance(&t, &Pose::IDENTITY, &t, &pb, 0.005, None, false));
+/// assert_eq!(apart.contained, None);
 /// assert!(!collide(&t, &Pose::IDENTITY, &t, &pb, &Request::default()).collide);
-/// assert_eq!(containment(&t, &Pose::IDENTITY, &t, &pb), None);
 /// let touching = Pose::from_translation(DVec3::new(1.0, 0.0, 0.0));
-/// let (apart, work) = pair_clearance_apart(&t, &Pose::IDENTITY, &t, &touching, 0.005, [None, None], &mut ClearanceCache::new());
+/// let (apart, work) = pair_clearance_apart(&t, &Pose::IDENTITY, &t, &touching, 0.005, true, [None, None], &mut ClearanceCache::new());
 /// assert_eq!((apart, work.pairs), (None, 0));
 /// ```
 #[allow(clippy::too_many_arguments)]
@@ -380,9 +393,10 @@ pub fn pair_clearance_apart(
     b: &ObbTree,
     pose_b: &Pose,
     threshold: f64,
+    solid: bool,
     spins: [Option<&SpinProfile>; 2],
     cache: &mut ClearanceCache,
-) -> (Option<Option<Clearance<()>>>, ClearanceWork) {
+) -> (Option<Apart>, ClearanceWork) {
     let mut work = ClearanceWork::default();
     let frame = RelativeFrame::new(pose_a, pose_b);
     let radius = b.radius_from_origin * (1.0 + 1e-12);
@@ -394,27 +408,104 @@ pub fn pair_clearance_apart(
     let (answer, apart) = evaluate(
         a, pose_a, b, pose_b, &frame, radius, threshold, spins, cache, &mut work,
     );
-    if apart {
-        work.pairs = 1;
-        (Some(answer), work)
-    } else {
+    if !apart {
         cache.last = last;
         cache.step = step;
-        (None, work)
+        return (None, work);
     }
+    work.pairs = 1;
+    let contained = if solid {
+        containment_apart(a, b, &frame, spins)
+    } else {
+        None
+    };
+    (
+        Some(Apart {
+            clearance: answer,
+            contained,
+        }),
+        work,
+    )
 }
 
-/// The solid-mode containment answer [`crate::collide`] gives (with [`crate::Request::solid`])
-/// for two posed trees whose surfaces do not touch: one closed mesh wholly inside the other,
-/// decided by exact point-in-mesh parity. For callers that proved the surfaces apart another
-/// way ([`pair_clearance_apart`]) and skip the collision traversal.
-pub fn containment(
+/// `crate::query::contained` (what [`crate::collide`] reports when no surface pair touches)
+/// for surfaces known not to touch, with a shortcut for a body that has a [`SpinProfile`]:
+/// its solid lies in the convex region `ρ <= ρ_max`, `z_min <= z <= z_max` about its axis (the
+/// region holds its surface, so its hull, so the solid). A connected surface that does not
+/// touch the other body's surface lies wholly inside or wholly outside it, so when the other
+/// body's surface is one connected component and one of its vertices lies outside that region,
+/// its component point is outside the solid: the parity test would say so, and is skipped.
+/// Otherwise the same parity tests, in the same order, with the same rays.
+fn containment_apart(
     a: &ObbTree,
-    pose_a: &Pose,
     b: &ObbTree,
-    pose_b: &Pose,
+    frame: &RelativeFrame,
+    spins: [Option<&SpinProfile>; 2],
 ) -> Option<crate::Containment> {
-    crate::query::contained(a, b, &RelativeFrame::new(pose_a, pose_b), CONTAINMENT_SEED)
+    let spin_a = spins[0].filter(|s| s.is_for(a));
+    let spin_b = spins[1].filter(|s| s.is_for(b));
+    if a.closed {
+        let outside = spin_a.is_some_and(|s| {
+            b.component_points.len() == 1
+                && s.any_outside(
+                    b,
+                    |x| frame.point(x),
+                    b.radius_from_origin + frame.t.length(),
+                )
+        });
+        if !outside {
+            let bounds = a.aabb;
+            let n = a.triangle_count();
+            for &p in &b.component_points {
+                let p = frame.point(p);
+                if crate::solid::point_inside(
+                    p,
+                    n,
+                    |i| a.triangle(i as u32),
+                    &bounds,
+                    CONTAINMENT_SEED,
+                ) == Some(true)
+                {
+                    return Some(crate::Containment::BInsideA);
+                }
+            }
+        }
+    }
+    if b.closed {
+        let rough = frame.aabb(&b.aabb, crate::query::query_slack(a, b, frame));
+        if !a.component_points.iter().any(|p| rough.contains_point(*p)) {
+            return None;
+        }
+        let mt = frame.m.transpose();
+        let outside = spin_b.is_some_and(|s| {
+            a.component_points.len() == 1
+                && s.any_outside(
+                    a,
+                    |x| mt * (x - frame.t),
+                    a.radius_from_origin + frame.t.length(),
+                )
+        });
+        if outside {
+            return None;
+        }
+        let n = b.triangle_count();
+        let bounds = b.triangles().fold(frcd_geom::Aabb::EMPTY, |acc, t| {
+            acc.union(&frame.triangle(&t).aabb())
+        });
+        for &p in &a.component_points {
+            if crate::solid::point_inside(
+                p,
+                n,
+                |i| frame.triangle(&b.triangle(i as u32)),
+                &bounds,
+                CONTAINMENT_SEED,
+            ) == Some(true)
+            {
+                return Some(crate::Containment::AInsideB);
+            }
+        }
+    }
+    None
 }
 
 /// The ray seed [`crate::collide`] uses for its containment test.

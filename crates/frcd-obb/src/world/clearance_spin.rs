@@ -353,6 +353,28 @@ impl SpinProfile {
         (true, visits)
     }
 
+    /// True when some vertex of `other`, placed in this body's frame by `place`, lies outside
+    /// the convex region `ρ <= ρ_max`, `z_min <= z <= z_max` (over this body's surface) by more
+    /// than the slack: that vertex is then outside this body's solid. `extra_magnitude` as in
+    /// [`SpinProfile::proves_far`].
+    pub(crate) fn any_outside(
+        &self,
+        other: &ObbTree,
+        place: impl Fn(DVec3) -> DVec3,
+        extra_magnitude: f64,
+    ) -> bool {
+        let slack = SLACK_REL * (self.magnitude + extra_magnitude);
+        let r = &self.nodes[0].bx;
+        let (rmax, z0, z1) = (r.r1 + slack, r.z0 - slack, r.z1 + slack);
+        // Vertices of triangles (a vertex no triangle uses is no point of the surface).
+        other.mesh.indices().iter().any(|t| {
+            let v = other.mesh.vertices()[t[0] as usize];
+            let d = place(v) - self.c;
+            let z = d.dot(self.u);
+            z < z0 || z > z1 || d.dot(self.e1).hypot(d.dot(self.e2)) > rmax
+        })
+    }
+
     /// True when this profile was built for `tree` (or a clone of it).
     pub(crate) fn is_for(&self, tree: &ObbTree) -> bool {
         self.tree == tree.uid
