@@ -28,6 +28,22 @@
 //! test), and otherwise from the limit. Either way its answer is the smallest computed
 //! triangle-pair distance below the limit, as without the cache (on exact ties another triangle
 //! pair of the same distance may be named).
+//!
+//! # Bodies turning about their own axis ([`SpinProfile`], [`pair_clearance_spin`])
+//!
+//! The motion bound sees every vertex of a spinning wheel move (25 mm a frame on the bogie
+//! demo), so it never skips a wheel's pair. A body close to a solid of revolution carries a
+//! [`SpinProfile`]: the boxes of its triangles' images under the meridian map `x ↦ (ρ, z)`
+//! about its axis, which is 1-Lipschitz and blind to the turning angle; when the other body's
+//! meridian image stays farther than the threshold from them, the pair is proved not within,
+//! at whatever angle (derivation in [`SpinProfile`]'s module).
+//!
+//! # Before the collision query ([`pair_clearance_apart`])
+//!
+//! Every evaluation also knows whether it proved the exact distance above 0 (a skip of either
+//! kind, or a search whose certified lower bound is positive): then no triangle pair of the
+//! f64 inputs touches, which are the exact collision test's inputs, and a caller can skip the
+//! collision traversal; only solid-mode containment is left ([`Apart::contained`]).
 
 #[path = "clearance_spin.rs"]
 mod spin;
