@@ -43,11 +43,12 @@ impl Checker {
         // apart (a certified lower bound above 0 on their exact distance, for the same f64
         // inputs as the exact collision test), no triangle pair touches and only solid-mode
         // containment is left of the collision query: the answer is the same, without its
-        // traversal of surfaces that are a few millimetres apart. Not tried for a pair that
-        // interfered last frame (it most likely still does: the search would be wasted).
+        // traversal of surfaces that are a few millimetres apart. Tried only for a pair that
+        // was answered last frame without interfering: one that interfered most likely still
+        // does, and one seen for the first time may touch (the search would be wasted).
         let mut early_work = frcd_obb::ClearanceWork::default();
-        let interfered = job.state.result.as_ref().is_some_and(|o| o.collide());
-        if let (Plan::Cpu, Some(t), false) = (&plan, job.threshold, interfered) {
+        let was_apart = job.state.result.as_ref().is_some_and(|o| !o.collide());
+        if let (Plan::Cpu, Some(t), true) = (&plan, job.threshold, was_apart) {
             let (apart, w) = frcd_obb::pair_clearance_apart(
                 &self.clearance_trees[ma],
                 pa,

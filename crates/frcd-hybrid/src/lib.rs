@@ -36,9 +36,10 @@
 //! (a wheelset: [`frcd_obb::SpinProfile`], [`Options::clearance_spin`]) whose meridian images
 //! are farther apart than the threshold, whatever angle that body has turned to; and a search
 //! is bounded by the decision band (an exact [`frcd_obb::distance::within`] decides inside it).
-//! A pair whose boxes overlap and which did not interfere last frame gets its clearance first
-//! ([`frcd_obb::pair_clearance_apart`]): when that proves the surfaces apart, the collision
-//! query's surface traversal is skipped (only solid-mode containment is left, answered there).
+//! A pair whose boxes overlap and which was checked last frame without interfering gets its
+//! clearance first ([`frcd_obb::pair_clearance_apart`]): when that proves the surfaces apart,
+//! the collision query's surface traversal is skipped (only solid-mode containment is left,
+//! answered there).
 //! The answers equal those of a fresh state without these shortcuts. The searches run on
 //! trees of their own ([`Options::clearance_build`]) in the narrow phase, the longest pair
 //! jobs (by last frame's time) first, each thread taking the next job when it is done;
