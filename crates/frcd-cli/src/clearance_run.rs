@@ -111,13 +111,16 @@ impl ClearanceRun {
         let summary = self.summary(report);
         let w = &self.work;
         println!(
-            "clearance (threshold {}; {} pair evaluations: {} proved far by the motion bound, {} distance queries ({} warm-started), {} exact decisions):",
+            "clearance (threshold {}; {} pair evaluations: {} proved far by the motion bound, {} by the meridian bound, {} distance queries ({} warm-started), {} exact decisions; {} node pairs, {} triangle pairs in the searches that came below their limit):",
             self.threshold_text(),
             w.pairs,
             w.skipped,
+            w.spin_skipped,
             w.distance_queries,
             w.warm_starts,
-            w.exact_decisions
+            w.exact_decisions,
+            w.box_tests,
+            w.tri_tests
         );
         if summary.is_empty() {
             println!("  no checked pair came within its threshold");

@@ -254,6 +254,7 @@ fn options_of(args: &CheckerArgs, segments: bool, quiet: bool) -> Result<(Option
                 fit: fit_of(args.fit),
                 max_leaf_triangles: args.clearance_leaf.max(1),
             }),
+            clearance_spin: !args.no_spin_bound,
             ..Options::default()
         },
         source,

@@ -89,6 +89,10 @@ pub struct CheckerArgs {
     /// blocks, conformal to the treads a few millimetres off).
     #[arg(long, default_value_t = 1)]
     pub clearance_leaf: u32,
+    /// Do not use the meridian bound of bodies that are solids of revolution (wheelsets): every
+    /// pair the motion bound cannot skip gets a distance search (for comparison; same answers).
+    #[arg(long)]
+    pub no_spin_bound: bool,
     /// OBB tree: box fitting rule.
     #[arg(long, value_enum, default_value = "vertex")]
     pub fit: FitArg,

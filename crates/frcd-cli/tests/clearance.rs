@@ -277,8 +277,10 @@ fn bad_thresholds_fail_cleanly_before_the_run() {
 }
 
 /// Every frame of the bogie demo with 5 mm: the checker's clearances through the run's state
-/// (motion-bound skips, warm starts) equal those of a fresh state each frame (no temporal
-/// state): the same pairs, the same distances, and the frames at 0 are the interfering ones.
+/// (motion-bound skips, warm starts) and the wheelsets' meridian bound equal those of a fresh
+/// state each frame of a checker without the meridian bound (no temporal state, a distance
+/// search for every pair in range): the same pairs, the same distances, and the frames at 0
+/// are the interfering ones.
 #[test]
 fn bogie_cached_clearance_equals_fresh_on_every_frame() {
     use frcd_hybrid::{Backend, BodySpec, Checker, FrameState, Options};
@@ -289,26 +291,38 @@ fn bogie_cached_clearance_equals_fresh_on_every_frame() {
         return;
     }
     let scene = frcd_io::Scene::load(&path).unwrap();
-    let bodies = scene
-        .bodies()
-        .iter()
-        .map(|b| BodySpec {
-            name: b.name.clone(),
-            mesh: b.mesh.clone(),
-            is_static: b.is_static,
-        })
-        .collect();
+    let bodies = || {
+        scene
+            .bodies()
+            .iter()
+            .map(|b| BodySpec {
+                name: b.name.clone(),
+                mesh: b.mesh.clone(),
+                is_static: b.is_static,
+            })
+            .collect()
+    };
     let options = Options {
         backend: Backend::Cpu,
         clearance: Some(0.005),
         ..Options::default()
     };
-    let checker = Checker::new(bodies, scene.exclusions(), options).unwrap();
+    assert!(options.clearance_spin);
+    let checker = Checker::new(bodies(), scene.exclusions(), options.clone()).unwrap();
+    let plain = Checker::new(
+        bodies(),
+        scene.exclusions(),
+        Options {
+            clearance_spin: false,
+            ..options
+        },
+    )
+    .unwrap();
     let mut state = FrameState::default();
     let (mut work, mut reported) = (frcd_obb::ClearanceWork::default(), 0);
     for (k, frame) in scene.frames().iter().enumerate() {
         let cached = checker.check(&frame.poses, &mut state).unwrap();
-        let fresh = checker
+        let fresh = plain
             .check(&frame.poses, &mut FrameState::default())
             .unwrap();
         assert_eq!(cached.contacts, fresh.contacts, "frame {k}");
@@ -336,6 +350,8 @@ fn bogie_cached_clearance_equals_fresh_on_every_frame() {
     }
     // The temporal state did skip queries, and the run reported pairs every frame.
     assert!(work.skipped > 1000, "{work:?}");
+    // The wheelsets' pairs with the side frames and the car body: proved far at every spin.
+    assert!(work.spin_skipped > 10_000, "{work:?}");
     assert!(reported > scene.frame_count(), "{reported}");
     println!("bogie clearance work with temporal state: {work:?}");
 }

@@ -9,11 +9,11 @@ use crate::gpu::Image;
 use crate::report::{PairClearance, PairContact, Stage, StageBackend, StageReport, Via};
 use crate::{Accuracy, Backend, BodySpec, FrameResult, FrameState, HybridError, Options};
 use frcd_geom::{Pose, TriMesh};
-use frcd_obb::{ObbTree, World, WorldOptions};
+use frcd_obb::{ObbTree, SpinProfile, World, WorldOptions};
 use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::time::Instant;
 
 static NEXT_SERIAL: AtomicU64 = AtomicU64::new(1);
@@ -39,6 +39,9 @@ pub struct Checker {
     /// Per mesh, the tree of the clearance searches (`trees` unless
     /// [`Options::clearance_build`] asks for others).
     pub(crate) clearance_trees: Vec<Arc<ObbTree>>,
+    /// Per mesh, its meridian profile when it is a solid of revolution and
+    /// [`Options::clearance_spin`] asks for them.
+    pub(crate) clearance_spins: Vec<Option<Arc<SpinProfile>>>,
     pub(crate) excluded: HashSet<(u32, u32)>,
     pub(crate) options: Options,
     pub(crate) notes: Vec<String>,
@@ -124,6 +127,15 @@ impl Checker {
                 .collect(),
             _ => trees.clone(),
         };
+        let clearance_spins: Vec<Option<Arc<SpinProfile>>> =
+            if wants_clearance && options.clearance_spin {
+                clearance_trees
+                    .par_iter()
+                    .map(|t| SpinProfile::detect(t).map(Arc::new))
+                    .collect()
+            } else {
+                vec![None; clearance_trees.len()]
+            };
         #[allow(unused_mut)]
         let mut checker = Checker {
             serial: NEXT_SERIAL.fetch_add(1, Ordering::Relaxed),
@@ -132,6 +144,7 @@ impl Checker {
             meshes,
             trees,
             clearance_trees,
+            clearance_spins,
             excluded,
             options,
             notes: Vec::new(),
@@ -317,10 +330,7 @@ impl Checker {
             .filter(|j| !matches!(j.plan, Plan::Reuse | Plan::Dropped | Plan::ClearanceOnly))
             .count()
             - gpu_pairs;
-        let run = |work: &mut Vec<Job>| {
-            work.par_iter_mut()
-                .for_each(|job| self.finish_job(job, poses))
-        };
+        let run = |work: &mut Vec<Job>| self.run_jobs(work, poses);
         match &self.pool {
             Some(pool) => pool.install(|| run(&mut work)),
             None => run(&mut work),
@@ -369,6 +379,37 @@ impl Checker {
             state.pairs.insert(job.key, job.state);
         }
         Ok(result)
+    }
+
+    /// Runs the frame's jobs on the current pool, longest first by last frame's time, each
+    /// thread taking the next job when it is done (a few heavy pairs, such as the bogie's
+    /// wheel / brake-block distance searches, then land on different threads). The answers do
+    /// not depend on the order.
+    fn run_jobs(&self, work: &mut [Job], poses: &[Pose]) {
+        let threads = rayon::current_num_threads();
+        if threads <= 1 || work.len() <= 1 {
+            work.iter_mut().for_each(|job| self.finish_job(job, poses));
+            return;
+        }
+        let mut order: Vec<&mut Job> = work.iter_mut().collect();
+        order.sort_by(|x, y| y.state.last_time_us.total_cmp(&x.state.last_time_us));
+        let order: Vec<std::sync::Mutex<&mut Job>> =
+            order.into_iter().map(std::sync::Mutex::new).collect();
+        let next = AtomicUsize::new(0);
+        let take = || {
+            loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(job) = order.get(i) else { break };
+                let mut job = job.lock().unwrap_or_else(|e| e.into_inner());
+                self.finish_job(&mut job, poses);
+            }
+        };
+        rayon::scope(|s| {
+            for _ in 1..threads.min(order.len()) {
+                s.spawn(|_| take());
+            }
+            take();
+        });
     }
 
     /// Binds a fresh state to this checker: a World holding every body, its exclusions and

@@ -23,6 +23,7 @@ impl Checker {
         let t = Instant::now();
         self.finish_job_inner(job, poses);
         job.time_us = t.elapsed().as_secs_f64() * 1e6;
+        job.state.last_time_us = job.time_us;
     }
 
     fn finish_job_inner(&self, job: &mut Job, poses: &[Pose]) {
@@ -33,6 +34,67 @@ impl Checker {
             &self.trees[self.bodies[ib].mesh],
         );
         let plan = std::mem::replace(&mut job.plan, Plan::Cpu);
+        let (ma, mb) = (self.bodies[ia].mesh, self.bodies[ib].mesh);
+        let spins = [
+            self.clearance_spins[ma].as_deref(),
+            self.clearance_spins[mb].as_deref(),
+        ];
+        // A pair with a clearance threshold: its clearance first. When that proves the surfaces
+        // apart (a certified lower bound above 0 on their exact distance, for the same f64
+        // inputs as the exact collision test), no triangle pair touches and only solid-mode
+        // containment is left of the collision query: the answer is the same, without its
+        // traversal of surfaces that are a few millimetres apart. Tried only for a pair that
+        // was answered last frame without interfering: one that interfered most likely still
+        // does, and one seen for the first time may touch (the search would be wasted).
+        let mut early_work = frcd_obb::ClearanceWork::default();
+        let was_apart = job.state.result.as_ref().is_some_and(|o| !o.collide());
+        if let (Plan::Cpu, Some(t), true) = (&plan, job.threshold, was_apart) {
+            let (apart, w) = frcd_obb::pair_clearance_apart(
+                &self.clearance_trees[ma],
+                pa,
+                &self.clearance_trees[mb],
+                pb,
+                t,
+                self.options.solid,
+                spins,
+                &mut job.state.clearance,
+            );
+            early_work = w;
+            if let Some(apart) = apart {
+                // The clearance trees hold the collision trees' meshes: the same containment.
+                let contained = apart.contained;
+                let mut outcome = Outcome {
+                    pairs: Vec::new(),
+                    contained,
+                    segments: Vec::new(),
+                    via: Via::Cpu,
+                    clearance: apart.clearance,
+                };
+                job.clearance_work = early_work;
+                if contained.is_some() {
+                    // Interfering after all (one inside the other): its clearance is 0.
+                    let (c, w) = frcd_obb::pair_clearance_spin(
+                        &self.clearance_trees[ma],
+                        pa,
+                        &self.clearance_trees[mb],
+                        pb,
+                        t,
+                        None,
+                        true,
+                        spins,
+                        &mut job.state.clearance,
+                    );
+                    outcome.clearance = c;
+                    early_work.pairs = 0;
+                    job.clearance_work = early_work;
+                    job.clearance_work += w;
+                }
+                job.plan = Plan::Cpu;
+                job.state.poses = (*pa, *pb);
+                job.state.result = Some(outcome);
+                return;
+            }
+        }
         let outcome = match plan {
             Plan::Reuse => {
                 job.plan = Plan::Reuse;
@@ -98,16 +160,18 @@ impl Checker {
         };
         let mut outcome = outcome;
         if let Some(t) = job.threshold {
-            (outcome.clearance, job.clearance_work) = frcd_obb::pair_clearance_cached(
-                &self.clearance_trees[self.bodies[ia].mesh],
+            (outcome.clearance, job.clearance_work) = frcd_obb::pair_clearance_spin(
+                &self.clearance_trees[ma],
                 pa,
-                &self.clearance_trees[self.bodies[ib].mesh],
+                &self.clearance_trees[mb],
                 pb,
                 t,
                 outcome.pairs.first().copied(),
                 outcome.collide(),
+                spins,
                 &mut job.state.clearance,
             );
+            job.clearance_work += early_work;
         }
         job.plan = Plan::Cpu;
         job.state.poses = (*pa, *pb);

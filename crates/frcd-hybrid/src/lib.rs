@@ -30,12 +30,20 @@
 //! whose surfaces come within the threshold is reported in [`FrameResult::clearances`] with its
 //! distance, closest points and triangle pair ([`frcd_obb::distance`]); interfering pairs
 //! report 0. Pairs whose grown boxes stay apart cost no distance query; the others run
-//! [`frcd_obb::pair_clearance_cached`] with state kept in the [`FrameState`]: a pair whose
+//! [`frcd_obb::pair_clearance_spin`] with state kept in the [`FrameState`]: a pair whose
 //! last certified distance, less the bodies' motion since (rigorously bounded), stays above the
-//! threshold costs no query either, and a search is bounded by the decision band (an exact
-//! [`frcd_obb::distance::within`] decides inside it). The answers equal those of a fresh
-//! state. The searches run on trees of their own ([`Options::clearance_build`]), in the
-//! narrow phase's parallel loop; [`FrameResult::clearance_work`] counts them.
+//! threshold costs no query either; nor does one with a body that is a solid of revolution
+//! (a wheelset: [`frcd_obb::SpinProfile`], [`Options::clearance_spin`]) whose meridian images
+//! are farther apart than the threshold, whatever angle that body has turned to; and a search
+//! is bounded by the decision band (an exact [`frcd_obb::distance::within`] decides inside it).
+//! A pair whose boxes overlap and which was checked last frame without interfering gets its
+//! clearance first ([`frcd_obb::pair_clearance_apart`]): when that proves the surfaces apart,
+//! the collision query's surface traversal is skipped (only solid-mode containment is left,
+//! answered there).
+//! The answers equal those of a fresh state without these shortcuts. The searches run on
+//! trees of their own ([`Options::clearance_build`]) in the narrow phase, the longest pair
+//! jobs (by last frame's time) first, each thread taking the next job when it is done;
+//! [`FrameResult::clearance_work`] counts them.
 //!
 //! ## GPU failures and software adapters
 //!

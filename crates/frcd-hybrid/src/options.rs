@@ -103,6 +103,12 @@ pub struct Options {
     pub clearance: Option<f64>,
     /// Per body pair thresholds `((a, b), threshold)`, overriding `clearance` for that pair.
     pub pair_clearances: Vec<((usize, usize), f64)>,
+    /// Look for bodies that are solids of revolution ([`frcd_obb::SpinProfile::detect`]) when a
+    /// clearance threshold is set, and prove their pairs far with the meridian bound, which
+    /// holds whatever angle such a body has turned to about its axis (default true: a spinning
+    /// wheelset's pairs with the side frames need no distance search). The answers are the same
+    /// either way.
+    pub clearance_spin: bool,
 }
 
 impl Default for Options {
@@ -125,6 +131,7 @@ impl Default for Options {
             }),
             clearance: None,
             pair_clearances: Vec::new(),
+            clearance_spin: true,
         }
     }
 }

@@ -28,6 +28,8 @@ pub(crate) struct PairState {
     pub(crate) cache: PairCache,
     /// Temporal state of the clearance evaluation.
     pub(crate) clearance: ClearanceCache,
+    /// What this pair's job took last frame (µs): the narrow phase starts the longest first.
+    pub(crate) last_time_us: f64,
 }
 
 impl Default for PairState {
@@ -37,6 +39,7 @@ impl Default for PairState {
             result: None,
             cache: PairCache::new(),
             clearance: ClearanceCache::new(),
+            last_time_us: 0.0,
         }
     }
 }

@@ -45,6 +45,7 @@ pub use query::{
 pub use saved::{LoadError, SavedTree};
 pub use tree::{BuildOptions, Node, ObbTree};
 pub use world::{
-    BodyContact, BodyId, Clearance, ClearanceCache, ClearanceWork, StepReport, StepTiming, World,
-    WorldError, WorldOptions, pair_clearance, pair_clearance_cached,
+    Apart, BodyContact, BodyId, Clearance, ClearanceCache, ClearanceWork, SpinProfile, StepReport,
+    StepTiming, World, WorldError, WorldOptions, pair_clearance, pair_clearance_apart,
+    pair_clearance_cached, pair_clearance_spin,
 };

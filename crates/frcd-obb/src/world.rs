@@ -6,7 +6,8 @@ mod clearance;
 mod handle;
 
 pub use clearance::{
-    Clearance, ClearanceCache, ClearanceWork, pair_clearance, pair_clearance_cached,
+    Apart, Clearance, ClearanceCache, ClearanceWork, SpinProfile, pair_clearance,
+    pair_clearance_apart, pair_clearance_cached, pair_clearance_spin,
 };
 pub use handle::BodyId;
 

@@ -28,6 +28,25 @@
 //! test), and otherwise from the limit. Either way its answer is the smallest computed
 //! triangle-pair distance below the limit, as without the cache (on exact ties another triangle
 //! pair of the same distance may be named).
+//!
+//! # Bodies turning about their own axis ([`SpinProfile`], [`pair_clearance_spin`])
+//!
+//! The motion bound sees every vertex of a spinning wheel move (25 mm a frame on the bogie
+//! demo), so it never skips a wheel's pair. A body close to a solid of revolution carries a
+//! [`SpinProfile`]: the boxes of its triangles' images under the meridian map `x ↦ (ρ, z)`
+//! about its axis, which is 1-Lipschitz and blind to the turning angle; when the other body's
+//! meridian image stays farther than the threshold from them, the pair is proved not within,
+//! at whatever angle (derivation in [`SpinProfile`]'s module).
+//!
+//! # Before the collision query ([`pair_clearance_apart`])
+//!
+//! Every evaluation also knows whether it proved the exact distance above 0 (a skip of either
+//! kind, or a search whose certified lower bound is positive): then no triangle pair of the
+//! f64 inputs touches, which are the exact collision test's inputs, and a caller can skip the
+//! collision traversal; only solid-mode containment is left ([`Apart::contained`]).
+
+#[path = "clearance_spin.rs"]
+mod spin;
 
 use super::BodyId;
 use crate::distance::{
@@ -37,6 +56,7 @@ use crate::query::RelativeFrame;
 use crate::tree::ObbTree;
 use frcd_geom::{DMat3, DVec3, Pose};
 use frcd_tritri::Contact;
+pub use spin::SpinProfile;
 
 /// Factor from [`Distance::error_bound`] (well-conditioned features) to a bound that holds for
 /// every feature pair: `2²⁸·64ε = 2⁻¹⁹` relative to the scene magnitude, against the
@@ -87,21 +107,32 @@ pub struct ClearanceWork {
     pub pairs: u64,
     /// Pairs proved farther than their threshold by the motion bound: no query.
     pub skipped: u64,
+    /// Pairs proved farther than their threshold by the meridian bound of a body turning about
+    /// its own axis ([`SpinProfile`], [`pair_clearance_spin`]): no query.
+    pub spin_skipped: u64,
     /// Distance searches run.
     pub distance_queries: u64,
     /// Searches seeded with the previous answer's triangle pair.
     pub warm_starts: u64,
     /// Exact [`within`] decisions (a distance within its error band of the threshold).
     pub exact_decisions: u64,
+    /// Node-pair lower bounds computed by the distance searches (a time-free measure of their
+    /// work).
+    pub box_tests: u64,
+    /// Triangle pairs evaluated by the distance searches.
+    pub tri_tests: u64,
 }
 
 impl std::ops::AddAssign for ClearanceWork {
     fn add_assign(&mut self, o: Self) {
         self.pairs += o.pairs;
         self.skipped += o.skipped;
+        self.spin_skipped += o.spin_skipped;
         self.distance_queries += o.distance_queries;
         self.warm_starts += o.warm_starts;
         self.exact_decisions += o.exact_decisions;
+        self.box_tests += o.box_tests;
+        self.tri_tests += o.tri_tests;
     }
 }
 
@@ -226,6 +257,54 @@ pub fn pair_clearance_cached(
     interfering: bool,
     cache: &mut ClearanceCache,
 ) -> (Option<Clearance<()>>, ClearanceWork) {
+    pair_clearance_spin(
+        a,
+        pose_a,
+        b,
+        pose_b,
+        threshold,
+        witness,
+        interfering,
+        [None, None],
+        cache,
+    )
+}
+
+/// [`pair_clearance_cached`] that also uses the meridian bound of A's and B's [`SpinProfile`]
+/// (`spins[0]` for A, `spins[1]` for B; a profile built for another tree is ignored): a pair
+/// that the motion bound cannot skip is proved farther than its threshold without a distance
+/// query when its meridian images are that far apart, whatever angle the body with the
+/// profile has turned to (see [`SpinProfile`]). The answers are those of [`pair_clearance`].
+///
+/// ```
+/// use frcd_obb::{BuildOptions, ClearanceCache, ObbTree, SpinProfile, pair_clearance, pair_clearance_spin};
+/// use frcd_geom::{shapes, DQuat, DVec3, Pose};
+/// let opts = BuildOptions { max_leaf_triangles: 1, ..BuildOptions::default() };
+/// let wheel = ObbTree::build(&shapes::cylinder(0.46, 0.07, 64, 1).unwrap(), &opts);
+/// let block = ObbTree::build(&shapes::cuboid(DVec3::new(0.05, 0.05, 0.05)), &opts);
+/// let spin = SpinProfile::detect(&wheel).unwrap();
+/// let mut cache = ClearanceCache::new();
+/// let pb = Pose::from_translation(DVec3::new(0.53, 0.0, 0.0)); // 20 mm off the wheel
+/// for k in 0..10 {
+///     // The wheel turns 0.054 rad a frame: its rim moves 25 mm, more than the gap.
+///     let pa = Pose::new(DVec3::ZERO, DQuat::from_rotation_z(0.054 * k as f64));
+///     let (c, work) = pair_clearance_spin(&wheel, &pa, &block, &pb, 0.005, None, false, [Some(&spin), None], &mut cache);
+///     assert_eq!(c, pair_clearance(&wheel, &pa, &block, &pb, 0.005, None, false));
+///     assert_eq!((work.spin_skipped, work.distance_queries), (1, 0));
+/// }
+/// ```
+#[allow(clippy::too_many_arguments)]
+pub fn pair_clearance_spin(
+    a: &ObbTree,
+    pose_a: &Pose,
+    b: &ObbTree,
+    pose_b: &Pose,
+    threshold: f64,
+    witness: Option<(u32, u32)>,
+    interfering: bool,
+    spins: [Option<&SpinProfile>; 2],
+    cache: &mut ClearanceCache,
+) -> (Option<Clearance<()>>, ClearanceWork) {
     let mut work = ClearanceWork {
         pairs: 1,
         ..ClearanceWork::default()
@@ -233,11 +312,7 @@ pub fn pair_clearance_cached(
     let frame = RelativeFrame::new(pose_a, pose_b);
     let radius = b.radius_from_origin * (1.0 + 1e-12);
     // How far B moved since the last call: sizes the look-ahead below.
-    cache.step = match &cache.last {
-        Some((m, t)) => motion_bound(m, *t, &frame, radius),
-        None => f64::INFINITY,
-    };
-    cache.last = Some((frame.m, frame.t));
+    update_step(cache, &frame, radius);
     if interfering {
         cache.cert = None;
         cache.near = true;
@@ -286,15 +361,219 @@ pub fn pair_clearance_cached(
             work,
         );
     }
-    if threshold.is_nan() || threshold < 0.0 {
+    let (answer, _) = evaluate(
+        a, pose_a, b, pose_b, &frame, radius, threshold, spins, cache, &mut work,
+    );
+    (answer, work)
+}
+
+/// What [`pair_clearance_apart`] proved: the surfaces do not touch.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Apart {
+    /// The answer [`pair_clearance_spin`] gives for a pair that does not interfere (`None`:
+    /// farther than the threshold). Meaningless when `contained` is set: the pair then
+    /// interferes, and its clearance is that of an interfering pair.
+    pub clearance: Option<Clearance<()>>,
+    /// Solid-mode containment (when asked for): what [`crate::collide`] reports for these
+    /// poses when no surface pair touches.
+    pub contained: Option<crate::Containment>,
+}
+
+/// [`pair_clearance_spin`] before the collision query, for a pair that may not interfere:
+/// `Some` when this evaluation proves the two surfaces apart (a certified lower bound above 0
+/// on the exact distance of the f64 inputs, which are the exact collision test's: then no
+/// triangle pair touches, and of the collision query only solid-mode containment is left,
+/// answered here when `solid`), with the answer [`pair_clearance_spin`] gives for a pair that
+/// does not interfere. `None` when it cannot prove that: run the collision query, then
+/// [`pair_clearance_spin`] with its answer; this call's work then counts no pair evaluation
+/// (the second call does), its searches still count.
+///
+/// ```
+/// use frcd_obb::{BuildOptions, ClearanceCache, ObbTree, collide, pair_clearance, pair_clearance_apart, Request};
+/// use frcd_geom::{shapes, DVec3, Pose};
+/// let t = ObbTree::build(&shapes::cuboid(DVec3::splat(0.5)), &BuildOptions::default());
+/// let pb = Pose::from_translation(DVec3::new(1.003, 0.0, 0.0)); // 3 mm apart
+/// let (apart, _) = pair_clearance_apart(&t, &Pose::IDENTITY, &t, &pb, 0.005, true, [None, None], &mut ClearanceCache::new());
+/// let apart = apart.unwrap();
+/// assert_eq!(apart.clearance, pair_clearance(&t, &Pose::IDENTITY, &t, &pb, 0.005, None, false));
+/// assert_eq!(apart.contained, None);
+/// assert!(!collide(&t, &Pose::IDENTITY, &t, &pb, &Request::default()).collide);
+/// let touching = Pose::from_translation(DVec3::new(1.0, 0.0, 0.0));
+/// let (apart, work) = pair_clearance_apart(&t, &Pose::IDENTITY, &t, &touching, 0.005, true, [None, None], &mut ClearanceCache::new());
+/// assert_eq!((apart, work.pairs), (None, 0));
+/// ```
+#[allow(clippy::too_many_arguments)]
+pub fn pair_clearance_apart(
+    a: &ObbTree,
+    pose_a: &Pose,
+    b: &ObbTree,
+    pose_b: &Pose,
+    threshold: f64,
+    solid: bool,
+    spins: [Option<&SpinProfile>; 2],
+    cache: &mut ClearanceCache,
+) -> (Option<Apart>, ClearanceWork) {
+    let mut work = ClearanceWork::default();
+    let frame = RelativeFrame::new(pose_a, pose_b);
+    let radius = b.radius_from_origin * (1.0 + 1e-12);
+    // Leave `cache.step` and `cache.last` to `pair_clearance_spin` when this cannot decide: a
+    // second update in one frame would shrink the look-ahead to nothing.
+    let last = cache.last;
+    let step = cache.step;
+    update_step(cache, &frame, radius);
+    let (answer, apart) = evaluate(
+        a, pose_a, b, pose_b, &frame, radius, threshold, spins, cache, &mut work,
+    );
+    if !apart {
+        cache.last = last;
+        cache.step = step;
         return (None, work);
+    }
+    work.pairs = 1;
+    let contained = if solid {
+        containment_apart(a, b, &frame, spins)
+    } else {
+        None
+    };
+    (
+        Some(Apart {
+            clearance: answer,
+            contained,
+        }),
+        work,
+    )
+}
+
+/// `crate::query::contained` (what [`crate::collide`] reports when no surface pair touches)
+/// for surfaces known not to touch, with a shortcut for a body that has a [`SpinProfile`]:
+/// its solid lies in the convex region `ρ <= ρ_max`, `z_min <= z <= z_max` about its axis (the
+/// region holds its surface, so its hull, so the solid). A connected surface that does not
+/// touch the other body's surface lies wholly inside or wholly outside it, so when the other
+/// body's surface is one connected component and one of its vertices lies outside that region,
+/// its component point is outside the solid: the parity test would say so, and is skipped.
+/// Otherwise the same parity tests, in the same order, with the same rays.
+fn containment_apart(
+    a: &ObbTree,
+    b: &ObbTree,
+    frame: &RelativeFrame,
+    spins: [Option<&SpinProfile>; 2],
+) -> Option<crate::Containment> {
+    let spin_a = spins[0].filter(|s| s.is_for(a));
+    let spin_b = spins[1].filter(|s| s.is_for(b));
+    if a.closed {
+        let outside = spin_a.is_some_and(|s| {
+            b.component_points.len() == 1
+                && s.any_outside(
+                    b,
+                    |x| frame.point(x),
+                    b.radius_from_origin + frame.t.length(),
+                )
+        });
+        if !outside {
+            let bounds = a.aabb;
+            let n = a.triangle_count();
+            for &p in &b.component_points {
+                let p = frame.point(p);
+                if crate::solid::point_inside(
+                    p,
+                    n,
+                    |i| a.triangle(i as u32),
+                    &bounds,
+                    CONTAINMENT_SEED,
+                ) == Some(true)
+                {
+                    return Some(crate::Containment::BInsideA);
+                }
+            }
+        }
+    }
+    if b.closed {
+        let rough = frame.aabb(&b.aabb, crate::query::query_slack(a, b, frame));
+        if !a.component_points.iter().any(|p| rough.contains_point(*p)) {
+            return None;
+        }
+        let mt = frame.m.transpose();
+        let outside = spin_b.is_some_and(|s| {
+            a.component_points.len() == 1
+                && s.any_outside(
+                    a,
+                    |x| mt * (x - frame.t),
+                    a.radius_from_origin + frame.t.length(),
+                )
+        });
+        if outside {
+            return None;
+        }
+        let n = b.triangle_count();
+        let bounds = b.triangles().fold(frcd_geom::Aabb::EMPTY, |acc, t| {
+            acc.union(&frame.triangle(&t).aabb())
+        });
+        for &p in &a.component_points {
+            if crate::solid::point_inside(
+                p,
+                n,
+                |i| frame.triangle(&b.triangle(i as u32)),
+                &bounds,
+                CONTAINMENT_SEED,
+            ) == Some(true)
+            {
+                return Some(crate::Containment::AInsideB);
+            }
+        }
+    }
+    None
+}
+
+/// The ray seed [`crate::collide`] uses for its containment test.
+const CONTAINMENT_SEED: u64 = 0x5EED;
+
+/// Records the frame of this call and how far B moved since the last (sizes the look-ahead).
+fn update_step(cache: &mut ClearanceCache, frame: &RelativeFrame, radius: f64) {
+    cache.step = match &cache.last {
+        Some((m, t)) => motion_bound(m, *t, frame, radius),
+        None => f64::INFINITY,
+    };
+    cache.last = Some((frame.m, frame.t));
+}
+
+/// The evaluation of a pair that does not interfere: the answer, and whether it proved the
+/// surfaces apart (a certified lower bound above 0 on the exact distance).
+#[allow(clippy::too_many_arguments)]
+fn evaluate(
+    a: &ObbTree,
+    pose_a: &Pose,
+    b: &ObbTree,
+    pose_b: &Pose,
+    frame: &RelativeFrame,
+    radius: f64,
+    threshold: f64,
+    spins: [Option<&SpinProfile>; 2],
+    cache: &mut ClearanceCache,
+    work: &mut ClearanceWork,
+) -> (Option<Clearance<()>>, bool) {
+    let frame = *frame;
+    if threshold.is_nan() || threshold < 0.0 {
+        return (None, false);
     }
     let trees = (a.uid, b.uid);
     if let Some(c) = cache.cert.filter(|c| c.trees == trees) {
         let motion = motion_bound(&c.m, c.t, &frame, radius);
         if c.lower > (threshold + motion) * (1.0 + 1e-15) {
+            // `d* >= lower - motion > threshold >= 0`.
             work.skipped += 1;
-            return (None, work);
+            return (None, true);
+        }
+    }
+    // The meridian bound: every point pair farther than the threshold at any angle the
+    // profiled body has turned to about its axis.
+    for (k, s) in spins.iter().enumerate() {
+        let Some(s) = s.filter(|s| s.is_for(if k == 0 { a } else { b })) else {
+            continue;
+        };
+        if spin::pair_proved_far(s, k == 0, a, b, &frame, threshold).0 {
+            // Every point pair farther than `threshold >= 0`.
+            work.spin_skipped += 1;
+            return (None, true);
         }
     }
     let err = error_bound(a, pose_a, b, pose_b);
@@ -310,7 +589,8 @@ pub fn pair_clearance_cached(
     };
     let limit = band_top + reach;
     work.distance_queries += 1;
-    let found = search(a, pose_a, b, pose_b, &frame, limit, cache, &mut work);
+    let found = search(a, pose_a, b, pose_b, &frame, limit, cache, work);
+    let nan = found.is_some_and(|d| d.distance.is_nan());
     let Some(d) = found.filter(|d| !d.distance.is_nan()) else {
         // Every computed distance is at least `limit`: the exact one at least `limit - worst`.
         cache.cert = Some(Certificate {
@@ -319,8 +599,9 @@ pub fn pair_clearance_cached(
             t: frame.t,
             lower: lower_bound(limit, worst),
         });
-        return (None, work);
+        return (None, !nan && lower_bound(limit, worst) > 0.0);
     };
+    let apart = lower_bound(d.distance, worst) > 0.0;
     cache.cert = Some(Certificate {
         trees,
         m: frame.m,
@@ -328,7 +609,7 @@ pub fn pair_clearance_cached(
         lower: lower_bound(d.distance, worst),
     });
     if d.distance >= band_top {
-        return (None, work);
+        return (None, apart);
     }
     let inside = d.distance + d.error_bound <= threshold
         || (d.distance - worst <= threshold && {
@@ -343,7 +624,7 @@ pub fn pair_clearance_cached(
         triangles: d.triangles,
         interfering: false,
     });
-    (answer, work)
+    (answer, apart)
 }
 
 /// `x - worst`, rounded down.
@@ -396,5 +677,9 @@ fn search(
         distance_below(a, pose_a, b, pose_b, &r, limit)
     };
     cache.near = d.is_some();
+    if let Some(d) = &d {
+        work.box_tests += d.counters.box_tests;
+        work.tri_tests += d.counters.tri_tests;
+    }
     d
 }
