@@ -226,7 +226,6 @@ fn leaf_obb(items: &[Item], axes: Option<DMat3>, fit: FitMethod) -> Obb {
 /// node's mean (the split point) and covariance follow without another pass.
 #[derive(Clone, Copy, Debug)]
 struct Moments {
-    centroids: DVec3,
     r: DVec3,
     first: DVec3,
     second: [f64; 6],
@@ -235,7 +234,6 @@ struct Moments {
 impl Moments {
     fn new(r: DVec3) -> Self {
         Self {
-            centroids: DVec3::ZERO,
             r,
             first: DVec3::ZERO,
             second: [0.0; 6],
@@ -246,14 +244,13 @@ impl Moments {
     fn of(items: &[Item], r: DVec3) -> Self {
         let mut m = Self::new(r);
         for t in items {
-            m.add(&t.v, t.triangle().centroid());
+            m.add(&t.v);
         }
         m
     }
 
     #[inline(always)]
-    fn add(&mut self, v: &[DVec3; 3], centroid: DVec3) {
-        self.centroids += centroid;
+    fn add(&mut self, v: &[DVec3; 3]) {
         for p in v {
             let d = *p - self.r;
             self.first += d;
@@ -280,9 +277,10 @@ impl Moments {
         Some(symmetric_eigen_axes(cov))
     }
 
-    /// The mean of the `count` triangles' vertices (also the mean of their centroids).
+    /// The mean of the `count` triangles' vertices (also the mean of their centroids), from
+    /// the first moment about `r` (no separate sum, and exact offsets cost no precision).
     fn mean(&self, count: usize) -> DVec3 {
-        self.centroids / count as f64
+        self.r + self.first / (3 * count) as f64
     }
 
     /// The vertices' covariance `Σ d dᵀ / 3n − m mᵀ` (`m` the mean of `d`), or `None` where the
@@ -359,7 +357,8 @@ fn box_and_split(
     debug_assert_eq!(len, dst.len());
     let t = axes.transpose();
     let axis = axes.x_axis;
-    let cut = axis.dot(mean);
+    // Centroid `s / 3` against `cut`, as `s` against `3 cut`: no division per triangle.
+    let cut3 = 3.0 * axis.dot(mean);
     let mut lo = DVec3::splat(f64::INFINITY);
     let mut hi = DVec3::splat(f64::NEG_INFINITY);
     let mut mag = 0.0f64;
@@ -374,9 +373,8 @@ fn box_and_split(
             hi = hi.max(q);
         }
         mag = mag.max(item.mag);
-        let centroid = (a + b + c) / 3.0;
-        let right = axis.dot(centroid) >= cut;
-        sums[right as usize].add(&item.v, centroid);
+        let right = axis.dot(a + b + c) >= cut3;
+        sums[right as usize].add(&item.v);
         let k = if right { r - 1 } else { l };
         dst[k] = *item;
         l += (!right) as usize;
