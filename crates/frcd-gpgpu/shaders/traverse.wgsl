@@ -11,7 +11,7 @@
 // Everything is computed in A's local frame: B's geometry is mapped by the pair's relative pose
 // (R, t). Every mesh of a context lives in one pair of arena textures (rgba32float, one texel =
 // 4 floats), each tree in its own local frame, at the item offsets of its pair entry:
-//   node i: 5 texels  (c.xyz, 0) (a0.xyz, h0) (a1.xyz, h1) (a2.xyz, h2) (right, first, count, 0)
+//   node i: 5 texels  (c.xyz, eps) (a0.xyz, h0) (a1.xyz, h1) (a2.xyz, h2) (right, first, count, 0)
 //   triangle j (leaf order): 3 texels (v0.xyz, mesh index) (v1.xyz, 0) (v2.xyz, 0)
 // Node and triangle indices inside an item are relative to the mesh's base; item i lives at
 // row-major slot i of (layer, row, column group); see `slot`.
@@ -66,6 +66,8 @@ var<private> pose: PairInfo;
 
 struct Node {
     c: vec3<f32>,
+    // Bound on the axes' distance to an orthonormal frame (see `obb_overlap`).
+    eps: f32,
     a0: vec3<f32>,
     a1: vec3<f32>,
     a2: vec3<f32>,
@@ -96,6 +98,7 @@ fn load_node(i: u32) -> Node {
     let t4 = texel(nodes, s, 4u);
     var n: Node;
     n.c = t0.xyz;
+    n.eps = t0.w;
     n.a0 = t1.xyz;
     n.a1 = t2.xyz;
     n.a2 = t3.xyz;
@@ -118,65 +121,73 @@ fn maxabs(v: vec3<f32>) -> f32 {
     return max(abs(v.x), max(abs(v.y), abs(v.z)));
 }
 
-// B's box mapped into A's frame.
-struct BoxB {
-    c: vec3<f32>,
-    b0: vec3<f32>,
-    b1: vec3<f32>,
-    b2: vec3<f32>,
-}
-
-// True when L separates the boxes for certain. The projection of a parallelepiped
-// {c + sum s_i h_i a_i, |s_i| <= 1} on any vector L is exactly [c.L - r, c.L + r] with
-// r = sum h_i |a_i . L|, so no orthonormality is assumed and L may be the computed (rounded)
-// cross product: the test is exact for whatever L it uses. `s` bounds (per unit of |L|_1) the
-// difference between the computed and the true centre offset and radii; 10U (ra + rb) covers
-// the rounding of the radius sums (3 products, 2 sums each: gamma_5) and of the comparison's
-// two additions; `f` is the flush-to-zero term.
-fn separated(l: vec3<f32>, tt: vec3<f32>, na: Node, bb: BoxB, hb: vec3<f32>, s: f32, f: f32) -> bool {
-    let d = abs(dot(tt, l));
-    let ra = na.h.x * abs(dot(na.a0, l)) + na.h.y * abs(dot(na.a1, l)) + na.h.z * abs(dot(na.a2, l));
-    let rb = hb.x * abs(dot(bb.b0, l)) + hb.y * abs(dot(bb.b1, l)) + hb.z * abs(dot(bb.b2, l));
-    let ll = l1(l);
-    let err = (s * ll + 10.0 * U * (ra + rb) + f * (1.0 + ll)) * 1.01;
-    return d > ra + rb + err;
-}
-
-// Conservative OBB overlap: false only when some of the 15 axes separates the boxes with margin.
-fn obb_overlap(na: Node, nb: Node) -> bool {
-    var bb: BoxB;
-    bb.b0 = rot(nb.a0);
-    bb.b1 = rot(nb.a1);
-    bb.b2 = rot(nb.a2);
-    bb.c = rot(nb.c) + pose.t.xyz;
-    let tt = bb.c - na.c;
-    // Centre error per coordinate: R and t rounded to nearest on the CPU (U/2 each), rot()'s
-    // 3-term dot plus the + t (gamma_4 on |R||c| + |t|), T's subtraction (U |tt|), then the
-    // T.L dot product (gamma_3 |tt|): <= 5U (|c|_1 + |t|_1) + 5U |tt|_1.
-    // Radius error per unit |L|_1: A's axes dotted with L (gamma_3, entries <= 1): 4U per
-    // half extent; B's rotated axes carry U/2 |b|_1 (R's rounding) + gamma_3 |b|_1 per
-    // coordinate, |b|_1 <= sqrt(3), plus their own dot with L: 10U per half extent.
-    let s = 5.0 * U * (l1(nb.c) + l1(pose.t.xyz)) + 5.0 * U * l1(tt)
-        + 4.0 * U * (na.h.x + na.h.y + na.h.z) + 10.0 * U * (nb.h.x + nb.h.y + nb.h.z);
-    // Flush to zero: each of the ~40 operations behind d, ra, rb may lose TAU, later scaled
-    // by at most max(1, |L|, h, |t|) (the bound is multiplied by (1 + |L|_1) in `separated`).
-    let f = 64.0 * TAU * (1.0 + na.h.x + na.h.y + na.h.z + nb.h.x + nb.h.y + nb.h.z + l1(tt));
+// Conservative OBB overlap (Gottschalk's form of the 15-axis test): false only when some axis
+// separates the boxes with margin. C = (a_i . b_j) holds B's axes in A's frame and T = (a_i . tt)
+// the centre offset, both computed once; every axis then costs a few products of C, |C| and T
+// entries instead of a general projection.
+//
+// Error bound (valid for any rounding direction, FMA contraction and flush-to-zero; U, TAU as
+// above). The boxes are the f32 parallelepipeds {c + sum s_i h_i a_i}; their axes are only
+// near-orthonormal: the CPU stores in (c, w) an eps_A >= max_i |a_i - q_i|_2 for an orthonormal
+// Q_A (3 max|A^T A - I|, via the polar factor; see `pack::ObbF32::axes_deviation`). Box A lies in
+// the orthonormal box (c, Q_A, h_i + eps_A sum h), likewise B, and the exact Gottschalk test of
+// those boxes (exact pose R64, t64) is what the computed test must imply. With
+// eps = eps_A + eps_B + U (U also covers R64's f64 non-orthogonality), per entry:
+// - |C_ij - C'_ij| <= e_C = 10U + 1.01 eps: rot() with R rounded (3.6U per coordinate of b_j),
+//   the dot with a_i (3.1U + 6.3U for b_j's error), and the axes' distance to Q (eps).
+// - |T_i - T'_i| <= e_T = 9U (|c_B|_1 + |t|_1) + 7U |tt|_1 + 1.01 eps |tt|_1: the centre (rot()
+//   + t, R and t rounded: 5U per coordinate of |c_B|_1 + |t|_1; the subtraction U |tt|), the
+//   dot with a_i or b_j (3.1U |tt|_1, plus 3.6U |tt|_1 for b_j's error), the axes' eps.
+// - an edge axis's offset T_m C_kj - T_k C_mj (|C'| <= 1, |T| <= 1.01 |tt|_1) is off by
+//   <= 2 e_T + 2.02 e_C |tt|_1 + 4.1U |tt|_1 (its own two roundings).
+// - a radius (h'_k |C'| summed, h' the inflated extents) exceeds the computed one by
+//   <= (e_C + 2.1 eps_A) sum h_A + (e_C + 2.1 eps_B) sum h_B; its computation (gamma_3 on
+//   <= 1.01 sum h) and the comparison's two additions: 6U (sum h_A + sum h_B).
+// Summed with margin: err = 20U (|c_B|_1 + |t|_1) + (48U + 5 eps) |tt|_1
+//   + (20U + 4 eps) (sum h_A + sum h_B) + 128 TAU (1 + sum h + |tt|_1) (flush-to-zero: each of
+// the ~20 operations behind an entry may lose TAU, later scaled by at most h, |tt| or 1), all
+// terms >= 0, times 1.01 for the ~15 roundings of err itself. The same err serves all 15 axes.
+fn obb_overlap(na: Node, nb: Node, eps_a: f32, eps_b: f32) -> bool {
+    let b0 = rot(nb.a0);
+    let b1 = rot(nb.a1);
+    let b2 = rot(nb.a2);
+    let tt = rot(nb.c) + pose.t.xyz - na.c;
+    // Rows: A's axes; columns: B's axes.
+    let c0 = vec3<f32>(dot(na.a0, b0), dot(na.a0, b1), dot(na.a0, b2));
+    let c1 = vec3<f32>(dot(na.a1, b0), dot(na.a1, b1), dot(na.a1, b2));
+    let c2 = vec3<f32>(dot(na.a2, b0), dot(na.a2, b1), dot(na.a2, b2));
+    let t = vec3<f32>(dot(na.a0, tt), dot(na.a1, tt), dot(na.a2, tt));
+    let ha = na.h;
     let hb = nb.h;
-    if separated(na.a0, tt, na, bb, hb, s, f) { return false; }
-    if separated(na.a1, tt, na, bb, hb, s, f) { return false; }
-    if separated(na.a2, tt, na, bb, hb, s, f) { return false; }
-    if separated(bb.b0, tt, na, bb, hb, s, f) { return false; }
-    if separated(bb.b1, tt, na, bb, hb, s, f) { return false; }
-    if separated(bb.b2, tt, na, bb, hb, s, f) { return false; }
-    if separated(cross(na.a0, bb.b0), tt, na, bb, hb, s, f) { return false; }
-    if separated(cross(na.a0, bb.b1), tt, na, bb, hb, s, f) { return false; }
-    if separated(cross(na.a0, bb.b2), tt, na, bb, hb, s, f) { return false; }
-    if separated(cross(na.a1, bb.b0), tt, na, bb, hb, s, f) { return false; }
-    if separated(cross(na.a1, bb.b1), tt, na, bb, hb, s, f) { return false; }
-    if separated(cross(na.a1, bb.b2), tt, na, bb, hb, s, f) { return false; }
-    if separated(cross(na.a2, bb.b0), tt, na, bb, hb, s, f) { return false; }
-    if separated(cross(na.a2, bb.b1), tt, na, bb, hb, s, f) { return false; }
-    if separated(cross(na.a2, bb.b2), tt, na, bb, hb, s, f) { return false; }
+    let sha = ha.x + ha.y + ha.z;
+    let shb = hb.x + hb.y + hb.z;
+    let ltt = l1(tt);
+    let eps = eps_a + eps_b + U;
+    let err = (20.0 * U * (l1(nb.c) + l1(pose.t.xyz)) + (48.0 * U + 5.0 * eps) * ltt
+        + (20.0 * U + 4.0 * eps) * (sha + shb)
+        + 128.0 * TAU * (1.0 + sha + shb + ltt)) * 1.01;
+    let a0 = abs(c0);
+    let a1 = abs(c1);
+    let a2 = abs(c2);
+    // A's face axes: radius of A is h_i, of B sum_j hb_j |C_ij|.
+    if abs(t.x) > ha.x + dot(hb, a0) + err { return false; }
+    if abs(t.y) > ha.y + dot(hb, a1) + err { return false; }
+    if abs(t.z) > ha.z + dot(hb, a2) + err { return false; }
+    // B's face axes: offset tt . b_j, radius of A sum_i h_i |C_ij|, of B hb_j.
+    if abs(dot(tt, b0)) > dot(ha, vec3<f32>(a0.x, a1.x, a2.x)) + hb.x + err { return false; }
+    if abs(dot(tt, b1)) > dot(ha, vec3<f32>(a0.y, a1.y, a2.y)) + hb.y + err { return false; }
+    if abs(dot(tt, b2)) > dot(ha, vec3<f32>(a0.z, a1.z, a2.z)) + hb.z + err { return false; }
+    // Edge axes a_i x b_j, (i, k, m) cyclic: offset T_m C_kj - T_k C_mj, radius of A
+    // h_k |C_mj| + h_m |C_kj|, of B (j, p, q cyclic) hb_p |C_iq| + hb_q |C_ip|.
+    if abs(t.z * c1.x - t.y * c2.x) > ha.y * a2.x + ha.z * a1.x + hb.y * a0.z + hb.z * a0.y + err { return false; }
+    if abs(t.z * c1.y - t.y * c2.y) > ha.y * a2.y + ha.z * a1.y + hb.x * a0.z + hb.z * a0.x + err { return false; }
+    if abs(t.z * c1.z - t.y * c2.z) > ha.y * a2.z + ha.z * a1.z + hb.x * a0.y + hb.y * a0.x + err { return false; }
+    if abs(t.x * c2.x - t.z * c0.x) > ha.x * a2.x + ha.z * a0.x + hb.y * a1.z + hb.z * a1.y + err { return false; }
+    if abs(t.x * c2.y - t.z * c0.y) > ha.x * a2.y + ha.z * a0.y + hb.x * a1.z + hb.z * a1.x + err { return false; }
+    if abs(t.x * c2.z - t.z * c0.z) > ha.x * a2.z + ha.z * a0.z + hb.x * a1.y + hb.y * a1.x + err { return false; }
+    if abs(t.y * c0.x - t.x * c1.x) > ha.x * a1.x + ha.y * a0.x + hb.y * a2.z + hb.z * a2.y + err { return false; }
+    if abs(t.y * c0.y - t.x * c1.y) > ha.x * a1.y + ha.y * a0.y + hb.x * a2.z + hb.z * a2.x + err { return false; }
+    if abs(t.y * c0.z - t.x * c1.z) > ha.x * a1.z + ha.y * a0.z + hb.x * a2.y + hb.y * a2.x + err { return false; }
     return true;
 }
 
@@ -330,7 +341,7 @@ fn traverse(@builtin(workgroup_id) wid: vec3<u32>,
     let pair = entry.yz;
     let na = load_node(pose.base.x + pair.x);
     let nb = load_node(pose.base.z + pair.y);
-    if !obb_overlap(na, nb) {
+    if !obb_overlap(na, nb, na.eps, nb.eps) {
         return;
     }
     let a_leaf = na.count > 0u;

@@ -208,77 +208,83 @@ fn rot(p: &PoseF, v: V3) -> V3 {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct NodeF {
     pub c: V3,
+    /// The axes' distance bound to an orthonormal frame (texel 0's w).
+    pub eps: f32,
     pub a: [V3; 3],
     pub h: V3,
 }
 
-struct BoxB {
-    c: V3,
-    b: [V3; 3],
-}
-
-fn separated(l: V3, tt: V3, na: &NodeF, bb: &BoxB, hb: V3, s: f32, f: f32) -> bool {
-    let d = dot(tt, l).abs();
-    let ra = mad(
-        na.h.z,
-        dot(na.a[2], l).abs(),
-        mad(
-            na.h.y,
-            dot(na.a[1], l).abs(),
-            mul(na.h.x, dot(na.a[0], l).abs()),
-        ),
-    );
-    let rb = mad(
-        hb.z,
-        dot(bb.b[2], l).abs(),
-        mad(
-            hb.y,
-            dot(bb.b[1], l).abs(),
-            mul(hb.x, dot(bb.b[0], l).abs()),
-        ),
-    );
-    let ll = l1(l);
+/// Mirror of the shader's `obb_overlap` (Gottschalk's form, same operation order).
+pub(crate) fn obb_overlap(p: &PoseF, na: &NodeF, nb: &NodeF) -> bool {
+    let b = [rot(p, nb.a[0]), rot(p, nb.a[1]), rot(p, nb.a[2])];
+    let tt = rot(p, nb.c).add(p.t).sub(na.c);
+    // c[i].{x,y,z} = a_i . b_{0,1,2}
+    let c: [V3; 3] =
+        std::array::from_fn(|i| v3(dot(na.a[i], b[0]), dot(na.a[i], b[1]), dot(na.a[i], b[2])));
+    let t = v3(dot(na.a[0], tt), dot(na.a[1], tt), dot(na.a[2], tt));
+    let (ha, hb) = (na.h, nb.h);
+    let sha = add(add(ha.x, ha.y), ha.z);
+    let shb = add(add(hb.x, hb.y), hb.z);
+    let ltt = l1(tt);
+    let eps = add(add(na.eps, nb.eps), U);
     let err = mul(
         add(
-            add(mul(s, ll), mul(mul(10.0, U), add(ra, rb))),
-            mul(f, add(1.0, ll)),
+            add(
+                mad(
+                    add(mul(48.0, U), mul(5.0, eps)),
+                    ltt,
+                    mul(mul(20.0, U), add(l1(nb.c), l1(p.t))),
+                ),
+                mul(add(mul(20.0, U), mul(4.0, eps)), add(sha, shb)),
+            ),
+            mul(mul(128.0, TAU), add(add(add(1.0, sha), shb), ltt)),
         ),
         1.01,
     );
     let err = err * env().bound_scale;
-    d > add(add(ra, rb), err)
-}
-
-/// Mirror of the shader's `obb_overlap`.
-pub(crate) fn obb_overlap(p: &PoseF, na: &NodeF, nb: &NodeF) -> bool {
-    let bb = BoxB {
-        b: [rot(p, nb.a[0]), rot(p, nb.a[1]), rot(p, nb.a[2])],
-        c: rot(p, nb.c).add(p.t),
-    };
-    let tt = bb.c.sub(na.c);
-    let ha = add(add(na.h.x, na.h.y), na.h.z);
-    let hbs = add(add(nb.h.x, nb.h.y), nb.h.z);
-    let s = add(
-        add(
-            add(
-                mul(mul(5.0, U), add(l1(nb.c), l1(p.t))),
-                mul(mul(5.0, U), l1(tt)),
-            ),
-            mul(mul(4.0, U), ha),
-        ),
-        mul(mul(10.0, U), hbs),
-    );
-    let f = mul(mul(64.0, TAU), add(add(add(1.0, ha), hbs), l1(tt)));
-    let hb = nb.h;
-    let mut axes = vec![na.a[0], na.a[1], na.a[2], bb.b[0], bb.b[1], bb.b[2]];
+    let abs3 = |v: V3| v3(v.x.abs(), v.y.abs(), v.z.abs());
+    let a = [abs3(c[0]), abs3(c[1]), abs3(c[2])];
+    let g = |v: V3, k: usize| [v.x, v.y, v.z][k];
+    let hav = [ha.x, ha.y, ha.z];
+    let hbv = [hb.x, hb.y, hb.z];
+    let tv = [t.x, t.y, t.z];
+    // A's face axes.
     for i in 0..3 {
-        for j in 0..3 {
-            axes.push(cross(na.a[i], bb.b[j]));
+        if tv[i].abs() > add(add(hav[i], dot(hb, a[i])), err) {
+            return false;
         }
     }
-    !axes
-        .into_iter()
-        .any(|l| separated(l, tt, na, &bb, hb, s, f))
+    // B's face axes.
+    for j in 0..3 {
+        let col = v3(g(a[0], j), g(a[1], j), g(a[2], j));
+        if dot(tt, b[j]).abs() > add(add(dot(ha, col), hbv[j]), err) {
+            return false;
+        }
+    }
+    // Edge axes a_i x b_j, (i, k, m) and (j, p, q) cyclic.
+    for i in 0..3 {
+        let (k, m) = ((i + 1) % 3, (i + 2) % 3);
+        for j in 0..3 {
+            let (pp, q) = ((j + 1) % 3, (j + 2) % 3);
+            let d = mad(tv[m], g(c[k], j), -mul(tv[k], g(c[m], j))).abs();
+            // The shader lists the terms as (h of the lower index first).
+            let (k1, m1) = if k < m { (k, m) } else { (m, k) };
+            let (p1, q1) = if pp < q { (pp, q) } else { (q, pp) };
+            let r = mad(
+                hbv[q1],
+                g(a[i], p1),
+                mad(
+                    hbv[p1],
+                    g(a[i], q1),
+                    mad(hav[m1], g(a[k1], j), mul(hav[k1], g(a[m1], j))),
+                ),
+            );
+            if d > add(r, err) {
+                return false;
+            }
+        }
+    }
+    true
 }
 
 pub(crate) const TRI_DISJOINT: u32 = 0;
@@ -557,6 +563,116 @@ mod tests {
         assert!(lost > 0);
     }
 
+    /// Box pairs that share a point for certain, most of them only just: a corner of A (the
+    /// f32 parallelepiped) pushed a hair (1e-9 of its extents) through a face of B, which is
+    /// placed by an f64 pose so that the face's outward normal looks at A (so the overlap is
+    /// that hair, not a deep one). Scales 1e-3 to 1e4, A's centre up to 1e4 extents from the origin.
+    fn touching_boxes() -> Vec<(NodeF, NodeF, PoseF)> {
+        use crate::pack::ObbF32;
+        use frcd_geom::DMat3;
+        let seed = Cell::new(987654321u64);
+        let rnd = || {
+            let mut x = seed.get();
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            seed.set(x);
+            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let rv = || DVec3::new(rnd(), rnd(), rnd());
+        let rot = || {
+            DMat3::from_quat(DQuat::from_axis_angle(
+                rv().normalize_or(DVec3::Z),
+                3.0 * rnd(),
+            ))
+        };
+        let back = |v: [f32; 3]| DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64);
+        let node = |c: DVec3, m: DMat3, h: DVec3| {
+            let o = ObbF32 {
+                center: [c.x as f32, c.y as f32, c.z as f32],
+                axes: [m.x_axis, m.y_axis, m.z_axis].map(|a| [a.x as f32, a.y as f32, a.z as f32]),
+                half_extents: [h.x as f32, h.y as f32, h.z as f32],
+            };
+            let w = |x: [f32; 3]| v3(x[0], x[1], x[2]);
+            let n = NodeF {
+                c: w(o.center),
+                eps: o.axes_deviation(),
+                a: o.axes.map(w),
+                h: w(o.half_extents),
+            };
+            (o, n)
+        };
+        let mut out = Vec::new();
+        let scales = [1e-3, 1.0, 1e4];
+        // Offsets relative to the scale keep the f64 construction's rounding (<= 1e-12 of the
+        // extents) far inside the 1e-9 hair, and f32's (~1e-3 of them) far outside it.
+        let offsets = [0.0, 1e2, 1e4];
+        for k in 0..3000 {
+            let s = scales[k % 3];
+            let off = s * offsets[(k / 3) % 3];
+            let ext =
+                |_: ()| DVec3::new(rnd().abs() + 0.1, rnd().abs() + 0.1, rnd().abs() + 0.1) * s;
+            let (oa, na) = node(
+                DVec3::new(off, -0.5 * off, 0.3 * off) + s * rv(),
+                rot(),
+                ext(()),
+            );
+            let (ob, nb) = node(s * rv(), rot(), ext(()));
+            let r = rot();
+            // Face j of B (sign sj), at a random point of it (1e-9 inside).
+            let j = k % 3;
+            let sj = if rnd() > 0.0 { 1.0 } else { -1.0 };
+            let inner = 1.0 - 1e-9;
+            let mut u = [0.9 * rnd(), 0.9 * rnd(), 0.9 * rnd()];
+            u[j] = sj * inner;
+            let bq = back(ob.center)
+                + (0..3)
+                    .map(|i| u[i] * ob.half_extents[i] as f64 * back(ob.axes[i]))
+                    .fold(DVec3::ZERO, |x, y| x + y);
+            let n = r * (sj * back(ob.axes[j]));
+            // A's corner deepest towards -n, 1e-9 inside A.
+            let p = back(oa.center)
+                + (0..3)
+                    .map(|i| {
+                        let a = back(oa.axes[i]);
+                        -a.dot(n).signum() * inner * oa.half_extents[i] as f64 * a
+                    })
+                    .fold(DVec3::ZERO, |x, y| x + y);
+            // t such that R bq + t = p.
+            let t = p - r * bq;
+            let frame = RelativeFrame { m: r, t };
+            out.push((na, nb, pose_f(&frame)));
+        }
+        out
+    }
+
+    #[test]
+    fn no_touching_box_pair_is_separated_under_any_rounding() {
+        let cases = touching_boxes();
+        for env in envs(1.0) {
+            set_env(env);
+            for (i, (na, nb, pose)) in cases.iter().enumerate() {
+                assert!(obb_overlap(pose, na, nb), "{env:?}: box case {i} lost");
+            }
+        }
+        set_env(envs(1.0)[0]);
+    }
+
+    #[test]
+    fn without_the_bound_some_rounding_separates_a_touching_box_pair() {
+        let cases = touching_boxes();
+        let mut lost = 0;
+        for env in envs(0.0) {
+            set_env(env);
+            lost += cases
+                .iter()
+                .filter(|(na, nb, pose)| !obb_overlap(pose, na, nb))
+                .count();
+        }
+        set_env(envs(1.0)[0]);
+        assert!(lost > 0);
+    }
+
     /// Ancestors of every triangle slot (root first).
     fn ancestors(tree: &ObbTree) -> Vec<Vec<usize>> {
         let mut out = vec![Vec::new(); tree.triangles().len()];
@@ -583,6 +699,7 @@ mod tests {
         let c = |x: [f32; 3]| v3(x[0], x[1], x[2]);
         NodeF {
             c: c(b.center),
+            eps: b.axes_deviation(),
             a: [c(b.axes[0]), c(b.axes[1]), c(b.axes[2])],
             h: v3(b.half_extents[0], b.half_extents[1], b.half_extents[2]),
         }

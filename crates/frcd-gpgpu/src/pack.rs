@@ -6,7 +6,7 @@
 //!
 //! | item | texels |
 //! |---|---|
-//! | node | `(c, 0) (a0, h0) (a1, h1) (a2, h2) (right, first, count, 0)` |
+//! | node | `(c, eps) (a0, h0) (a1, h1) (a2, h2) (right, first, count, 0)` |
 //! | triangle (leaf order) | `(v0, mesh index) (v1, 0) (v2, 0)` |
 //!
 //! Indices are stored as f32, exact below 2^24, so trees are limited to 2^24 nodes and
@@ -16,8 +16,10 @@
 //! image keeps `c32 = fl(c)`, `A32 = fl(A)` (rounded to nearest) and inflates the half extents by
 //! `eta = (u ‖c‖₂ + √3 u ‖h‖₂) / σ_min(A32)` (`u = 2^-24`), rounded up: any point `c + A s` equals
 //! `c32 + A32 (s + Δs)` with `‖Δs‖∞ <= ‖A32⁻¹‖ ‖(c - c32) + (A - A32) s‖₂ <= eta`, so the f32 box
-//! holds the f64 box. The GPU's separating-axis test projects parallelepipeds exactly (it does not
-//! assume orthonormal axes) and bounds its own arithmetic.
+//! holds the f64 box. The GPU's separating-axis test (Gottschalk's form, which assumes orthonormal
+//! axes) reads the node's [`ObbF32::axes_deviation`] from texel 0's `w` and widens its error
+//! bound by it, so `A32`'s residual non-orthogonality never culls a pair; it also bounds its own
+//! arithmetic.
 
 use crate::GpuError;
 use frcd_geom::{DMat3, DVec3, Obb};
@@ -202,6 +204,28 @@ pub struct ObbF32 {
     pub half_extents: [f32; 3],
 }
 
+impl ObbF32 {
+    /// An upper bound on `max_i ‖a_i - q_i‖₂` over the columns of the f32 axes `A` and of some
+    /// orthonormal `Q` (the polar factor): `‖A - Q‖₂ = ‖P - I‖₂ <= ‖AᵀA - I‖₂ <= 3 max|AᵀA - I|`
+    /// (`A = QP`, each eigenvalue `λ` of `AᵀA` has `|√λ - 1| <= |λ - 1|`). The GPU's box test
+    /// (Gottschalk's form, which assumes orthonormal axes) inflates its error bound by it. The
+    /// Gram entries are computed in f64 from the f32 axes (products exact, sums off by < 1e-15,
+    /// covered by the added 1e-15), rounded up.
+    pub fn axes_deviation(&self) -> f32 {
+        let a = self
+            .axes
+            .map(|c| DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64));
+        let mut dev = 0f64;
+        for i in 0..3 {
+            for k in 0..3 {
+                let g = a[i].dot(a[k]) - if i == k { 1.0 } else { 0.0 };
+                dev = dev.max(g.abs());
+            }
+        }
+        round_up(3.0 * (dev + 1e-15))
+    }
+}
+
 fn v3(v: DVec3) -> [f32; 3] {
     [v.x as f32, v.y as f32, v.z as f32]
 }
@@ -372,7 +396,7 @@ fn pack_into(
         }
         let b = obb_to_f32(&n.obb, i)?;
         let t = [
-            [b.center[0], b.center[1], b.center[2], 0.0],
+            [b.center[0], b.center[1], b.center[2], b.axes_deviation()],
             [b.axes[0][0], b.axes[0][1], b.axes[0][2], b.half_extents[0]],
             [b.axes[1][0], b.axes[1][1], b.axes[1][2], b.half_extents[1]],
             [b.axes[2][0], b.axes[2][1], b.axes[2][2], b.half_extents[2]],
