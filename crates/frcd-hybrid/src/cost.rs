@@ -66,6 +66,20 @@ pub enum CostModelError {
         /// The cause.
         source: std::io::Error,
     },
+    /// The path is not a regular file (a FIFO, a device, a directory): refused unread.
+    #[error("cost model file {path}: not a regular file")]
+    NotAFile {
+        /// The path.
+        path: String,
+    },
+    /// The file is longer than [`CostModel::MAX_FILE_BYTES`].
+    #[error("cost model file {path}: longer than {limit} bytes, not a cost model")]
+    TooLarge {
+        /// The file.
+        path: String,
+        /// The limit in bytes.
+        limit: u64,
+    },
     /// The file is not a cost model.
     #[error("cost model file {path}: {source}")]
     Json {
@@ -87,14 +101,39 @@ pub enum CostModelError {
 }
 
 impl CostModel {
+    /// The largest cost model file [`CostModel::load`] reads: a model is a few hundred bytes, so
+    /// anything near this is not one (and `/dev/zero` is refused before it is read).
+    pub const MAX_FILE_BYTES: u64 = 1 << 20;
+
     /// Reads a model written by [`CostModel::save`] (or by hand) and checks every figure.
+    ///
+    /// Only a regular file of at most [`CostModel::MAX_FILE_BYTES`] is read: a FIFO, a device
+    /// or a directory is refused with [`CostModelError::NotAFile`] before it is opened for
+    /// reading, a longer file with [`CostModelError::TooLarge`].
     pub fn load(path: impl AsRef<Path>) -> Result<Self, CostModelError> {
+        use std::io::Read;
         let p = path.as_ref();
         let name = p.display().to_string();
-        let text = std::fs::read_to_string(p).map_err(|source| CostModelError::Io {
+        let io = |source| CostModelError::Io {
             path: name.clone(),
             source,
-        })?;
+        };
+        if !std::fs::metadata(p).map_err(io)?.is_file() {
+            return Err(CostModelError::NotAFile { path: name });
+        }
+        let mut text = String::new();
+        std::fs::File::open(p)
+            .map_err(io)?
+            // One byte past the limit tells a file at the limit from a longer one.
+            .take(Self::MAX_FILE_BYTES + 1)
+            .read_to_string(&mut text)
+            .map_err(io)?;
+        if text.len() as u64 > Self::MAX_FILE_BYTES {
+            return Err(CostModelError::TooLarge {
+                path: name,
+                limit: Self::MAX_FILE_BYTES,
+            });
+        }
         let model: CostModel =
             serde_json::from_str(&text).map_err(|source| CostModelError::Json {
                 path: name.clone(),
@@ -104,14 +143,40 @@ impl CostModel {
         Ok(model)
     }
 
-    /// Writes the model as pretty JSON.
+    /// Writes the model as pretty JSON, atomically: to a temporary file in the same folder,
+    /// then renamed over `path`, so a failed write (a full disk) never leaves a truncated model
+    /// or destroys the previous one.
     pub fn save(&self, path: impl AsRef<Path>) -> Result<(), CostModelError> {
+        use std::io::Write;
         let p = path.as_ref();
-        let text = serde_json::to_string_pretty(self).expect("plain data serializes");
-        std::fs::write(p, text + "\n").map_err(|source| CostModelError::Io {
+        let io = |source| CostModelError::Io {
             path: p.display().to_string(),
             source,
-        })
+        };
+        let text = serde_json::to_string_pretty(self).expect("plain data serializes");
+        let file_name = p.file_name().ok_or_else(|| {
+            io(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "the path names no file",
+            ))
+        })?;
+        let mut tmp_name = std::ffi::OsString::from(".");
+        tmp_name.push(file_name);
+        tmp_name.push(format!(".{}.tmp", std::process::id()));
+        let tmp = p.with_file_name(tmp_name);
+        let written = std::fs::File::create(&tmp).and_then(|mut f| {
+            f.write_all(text.as_bytes())?;
+            f.write_all(b"\n")?;
+            f.sync_all()
+        });
+        match written.and_then(|()| std::fs::rename(&tmp, p)) {
+            Ok(()) => Ok(()),
+            Err(e) => {
+                // Never leave the half-written temporary behind.
+                std::fs::remove_file(&tmp).ok();
+                Err(io(e))
+            }
+        }
     }
 
     fn validate(&self, path: &str) -> Result<(), CostModelError> {
@@ -243,6 +308,66 @@ mod tests {
             CostModel::load(dir.join("missing.json")),
             Err(CostModelError::Io { .. })
         ));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn load_refuses_non_files_and_huge_files_unread() {
+        let dir = std::env::temp_dir().join(format!("frcd-hybrid-cost-big-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // A directory and (on Unix) an endless device are refused before any read.
+        assert!(matches!(
+            CostModel::load(&dir),
+            Err(CostModelError::NotAFile { .. })
+        ));
+        if Path::new("/dev/zero").exists() {
+            assert!(matches!(
+                CostModel::load("/dev/zero"),
+                Err(CostModelError::NotAFile { .. })
+            ));
+        }
+        // A file one byte over the limit is refused by size, not parsed.
+        let big = dir.join("big.json");
+        std::fs::write(&big, vec![b' '; CostModel::MAX_FILE_BYTES as usize + 1]).unwrap();
+        let e = CostModel::load(&big).unwrap_err();
+        assert!(matches!(e, CostModelError::TooLarge { .. }), "{e}");
+        // At the limit it is read (and fails only as JSON: blanks are no model).
+        std::fs::write(&big, vec![b' '; CostModel::MAX_FILE_BYTES as usize]).unwrap();
+        assert!(matches!(
+            CostModel::load(&big),
+            Err(CostModelError::Json { .. })
+        ));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn save_is_atomic_and_leaves_no_temporary() {
+        let dir =
+            std::env::temp_dir().join(format!("frcd-hybrid-cost-save-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("cost.json");
+        let m = CostModel::default();
+        m.save(&p).unwrap();
+        let mut other = m.clone();
+        other.threads = 7;
+        other.save(&p).unwrap();
+        assert_eq!(CostModel::load(&p).unwrap(), other);
+        // Only the model is in the folder: the temporary was renamed, not left behind.
+        let names: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("cost.json")]);
+        // A save that cannot happen (the target is a directory) keeps the folder clean and
+        // reports an error naming the path.
+        let sub = dir.join("sub");
+        std::fs::create_dir_all(&sub).unwrap();
+        let e = m.save(&sub).unwrap_err();
+        assert!(e.to_string().contains("sub"), "{e}");
+        assert!(
+            std::fs::read_dir(&dir).unwrap().count() == 2,
+            "no temporary left"
+        );
         std::fs::remove_dir_all(&dir).ok();
     }
 }
