@@ -22,6 +22,7 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use frcd_benches::scenes::{self, Scene};
+use frcd_benches::thread_cpu;
 use frcd_geom::TriMesh;
 use frcd_obb::{BuildOptions, Mode, ObbTree, Request, collide};
 use std::hint::black_box;
@@ -83,31 +84,6 @@ fn load() -> String {
     std::fs::read_to_string("/proc/loadavg")
         .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
         .unwrap_or_else(|_| "?".into())
-}
-
-/// This thread's CPU time in seconds (Linux: `CLOCK_THREAD_CPUTIME_ID`), `None` elsewhere. On a
-/// machine shared with other work a build's wall time includes the time it waited for a core,
-/// which penalises the longer build more; its CPU time does not.
-#[cfg(target_os = "linux")]
-fn thread_cpu() -> Option<f64> {
-    #[repr(C)]
-    struct Timespec {
-        sec: i64,
-        nsec: i64,
-    }
-    unsafe extern "C" {
-        fn clock_gettime(clock: i32, tp: *mut Timespec) -> i32;
-    }
-    const CLOCK_THREAD_CPUTIME_ID: i32 = 3;
-    let mut t = Timespec { sec: 0, nsec: 0 };
-    // SAFETY: `t` is a valid, writable timespec; the call writes only to it.
-    let rc = unsafe { clock_gettime(CLOCK_THREAD_CPUTIME_ID, &mut t) };
-    (rc == 0).then_some(t.sec as f64 + t.nsec as f64 * 1e-9)
-}
-
-#[cfg(not(target_os = "linux"))]
-fn thread_cpu() -> Option<f64> {
-    None
 }
 
 /// Wall and thread-CPU time of one call.

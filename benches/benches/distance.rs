@@ -238,31 +238,12 @@ fn time_each(n: usize, mut f: impl FnMut(usize)) -> f64 {
     median(per)
 }
 
-/// This thread's CPU time in seconds (`FRCD_DISTANCE_CPU=1` times with it instead of the wall
-/// clock: on a loaded machine it leaves out the time the thread waits for a core; for
-/// comparing two builds of frcd, not for the peer ratios, which use the wall clock).
-#[cfg(target_os = "linux")]
+/// This thread's CPU time in seconds, NaN where it cannot be read (`FRCD_DISTANCE_CPU=1` times
+/// with it instead of the wall clock: on a loaded machine it leaves out the time the thread
+/// waits for a core; for comparing two builds of frcd, not for the peer ratios, which use the
+/// wall clock).
 fn thread_cpu() -> f64 {
-    #[repr(C)]
-    struct Timespec {
-        sec: i64,
-        nsec: i64,
-    }
-    unsafe extern "C" {
-        fn clock_gettime(clock: i32, tp: *mut Timespec) -> i32;
-    }
-    const CLOCK_THREAD_CPUTIME_ID: i32 = 3;
-    let mut t = Timespec { sec: 0, nsec: 0 };
-    // SAFETY: `t` is a valid, writable timespec; the call only writes it.
-    let rc = unsafe { clock_gettime(CLOCK_THREAD_CPUTIME_ID, &mut t) };
-    if rc != 0 {
-        return f64::NAN;
-    }
-    t.sec as f64 + t.nsec as f64 * 1e-9
-}
-#[cfg(not(target_os = "linux"))]
-fn thread_cpu() -> f64 {
-    f64::NAN
+    frcd_benches::thread_cpu().unwrap_or(f64::NAN)
 }
 
 fn export(p: &Pair, dir: &Path) -> std::io::Result<()> {
