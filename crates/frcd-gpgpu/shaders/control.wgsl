@@ -3,7 +3,9 @@
 // `init` starts a batch: the CPU wrote the root pair of every body pair into frontier 0.
 // `prepare` runs after each traversal level: it turns the next frontier's size into the
 // indirect dispatch arguments of the following level, records overflow (a frontier larger than
-// its buffer), and resets the append counter. Both run inside the query's one submission.
+// its buffer), and resets the append counter. `prepare_tris` runs after the last level: the
+// arguments of the `triangles` pass (one invocation per listed triangle pair). All run inside
+// the query's one submission.
 
 const WG: u32 = 64u;
 
@@ -34,6 +36,7 @@ fn init() {
     state.cur = m;
     atomicStore(&state.next, 0u);
     atomicStore(&state.out, 0u);
+    atomicStore(&state.tris, 0u);
     state.needed = n;
     state.levels = 0u;
     state.pairs_tested = 0u;
@@ -55,4 +58,11 @@ fn prepare() {
     let m = min(n, params.caps.x);
     state.cur = m;
     set_args(m);
+}
+
+// After the last level: one invocation per listed triangle pair (at most the list's capacity;
+// on overflow the CPU re-runs the batch with a larger list).
+@compute @workgroup_size(1)
+fn prepare_tris() {
+    set_args(min(atomicLoad(&state.tris), params.caps2.x));
 }

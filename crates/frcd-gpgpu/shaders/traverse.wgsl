@@ -4,9 +4,12 @@
 // Each invocation takes one (pair, node of A, node of B) entry from the current frontier and runs
 // the separating-axis test in f32 with a computed error bound, so rounding can only keep a pair,
 // never drop one. Overlapping internal pairs append their child pairs to the next frontier
-// (atomic compaction); overlapping leaf pairs run the triangle test (Guigue-Devillers orientation
-// form) and append the triangle pair, flagged "uncertain" when a sign it needs is within the
-// bound of zero.
+// (atomic compaction); overlapping leaf pairs append every triangle pair of the two leaves to
+// the triangle list. After the last level, `triangles` runs the triangle test (Guigue-Devillers
+// orientation form) once per listed pair, one pair per invocation (the tests of a leaf pair no
+// longer run as a loop in the few lanes that reached a leaf: a SIMD driver such as llvmpipe
+// then kept the other lanes of the vector idle), and appends the touching pairs to the output,
+// flagged "uncertain" when a sign it needs is within the bound of zero.
 //
 // Everything is computed in A's local frame: B's geometry is mapped by the pair's relative pose
 // (R, t). Every mesh of a context lives in one pair of arena textures (rgba32float, one texel =
@@ -52,12 +55,17 @@ const UNCERTAIN_FLAG: u32 = 0x80000000u;
 @group(0) @binding(1) var tris: texture_2d_array<f32>;
 @group(0) @binding(2) var<uniform> arena: Arena;
 
-// Frontier entries: (pair, node of A, node of B, unused).
+// `traverse`: this level's frontier (binding 0), the next level's (binding 1), both entries
+// (pair, node of A, node of B, unused), and the triangle list it appends to (binding 3),
+// entries (pair, triangle of A, triangle of B, unused), triangles in leaf order relative to each
+// mesh's first triangle.
+// `triangles` (same layout, other buffers): the triangle list (binding 0) and the output
+// (binding 1), entries (pair, triangle of A, triangle of B | UNCERTAIN_FLAG, unused) as input-mesh
+// indices; binding 3 is bound but not used.
 @group(1) @binding(0) var<storage, read> frontier_in: array<vec4<u32>>;
 @group(1) @binding(1) var<storage, read_write> frontier_out: array<vec4<u32>>;
 @group(1) @binding(2) var<storage, read_write> state: State;
-// Output entries: (pair, triangle of A, triangle of B | UNCERTAIN_FLAG, unused).
-@group(1) @binding(3) var<storage, read_write> out_pairs: array<vec4<u32>>;
+@group(1) @binding(3) var<storage, read_write> tri_list: array<vec4<u32>>;
 @group(1) @binding(4) var<uniform> params: Params;
 @group(1) @binding(5) var<storage, read> pairs: array<PairInfo>;
 
@@ -77,12 +85,12 @@ struct Node {
     count: u32,
 }
 
-// Texel coordinates (column of the item's first texel, row, layer) of item i: the integer
-// divisions are done once per item, not once per texel (a software driver emulates them lane
-// by lane).
+// Texel coordinates (column of the item's first texel, row, layer) of item i. Items per row
+// (lay.x) and rows per layer (lay.y) are powers of two with logarithms lay.z and lay.w: shifts
+// and masks, no integer division (a software driver runs vector divisions lane by lane).
 fn slot(lay: vec4<u32>, per_item: u32, i: u32) -> vec3<u32> {
-    let row_g = i / lay.x;
-    return vec3<u32>((i - row_g * lay.x) * per_item, row_g % lay.y, row_g / lay.y);
+    let row_g = i >> lay.z;
+    return vec3<u32>((i & (lay.x - 1u)) * per_item, row_g & (lay.y - 1u), row_g >> lay.w);
 }
 
 fn texel(t: texture_2d_array<f32>, s: vec3<u32>, k: u32) -> vec4<f32> {
@@ -294,35 +302,52 @@ fn tri_tri(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
     return tri_tri_3d(p1, q1, r1, p2, r2, q2, sp2, sr2, sq2, e);
 }
 
-fn emit(p: u32, ia: u32, ib: u32, uncertain: bool) {
-    let slot = atomicAdd(&state.out, 1u);
-    if slot < params.caps.y {
-        var tag = ib;
-        if uncertain {
-            tag = ib | UNCERTAIN_FLAG;
+// Appends every triangle pair of two overlapping leaves to the triangle list (past its capacity
+// nothing is written; the CPU sees `state.tris` above it and re-runs with a larger list).
+fn leaf_pair(p: u32, na: Node, nb: Node) {
+    let k = na.count * nb.count;
+    let base = atomicAdd(&state.tris, k);
+    if base + k <= params.caps2.x {
+        var w = base;
+        for (var i = 0u; i < na.count; i++) {
+            for (var j = 0u; j < nb.count; j++) {
+                tri_list[w] = vec4<u32>(p, na.first + i, nb.first + j, 0u);
+                w++;
+            }
         }
-        out_pairs[slot] = vec4<u32>(p, ia, tag, 0u);
     }
 }
 
-fn leaf_pair(p: u32, na: Node, nb: Node) {
+// One listed triangle pair per invocation: the triangle test, and the pair appended to the
+// output (`frontier_out` is bound to the output buffer here) unless it is certainly disjoint.
+@compute @workgroup_size(64)
+fn triangles(@builtin(workgroup_id) wid: vec3<u32>,
+             @builtin(num_workgroups) nwg: vec3<u32>,
+             @builtin(local_invocation_index) lid: u32) {
+    let idx = (wid.y * nwg.x + wid.x) * WG + lid;
+    if idx >= min(atomicLoad(&state.tris), params.caps2.x) {
+        return;
+    }
+    let entry = frontier_in[idx];
+    pose = pairs[entry.x];
     let lay = arena.tri_layout;
-    for (var i = 0u; i < na.count; i++) {
-        let ja = pose.base.y + na.first + i;
-        let sa = slot(lay, 3u, ja);
-        let a0 = texel(tris, sa, 0u);
-        let a1 = texel(tris, sa, 1u);
-        let a2 = texel(tris, sa, 2u);
-        for (var j = 0u; j < nb.count; j++) {
-            let jb = pose.base.w + nb.first + j;
-            let sb = slot(lay, 3u, jb);
-            let b0 = texel(tris, sb, 0u);
-            let b1 = texel(tris, sb, 1u);
-            let b2 = texel(tris, sb, 2u);
-            let r = tri_tri(a0.xyz, a1.xyz, a2.xyz, b0.xyz, b1.xyz, b2.xyz);
-            if r != TRI_DISJOINT {
-                emit(p, u32(a0.w), u32(b0.w), r == TRI_UNCERTAIN);
+    let sa = slot(lay, 3u, pose.base.y + entry.y);
+    let sb = slot(lay, 3u, pose.base.w + entry.z);
+    let a0 = texel(tris, sa, 0u);
+    let a1 = texel(tris, sa, 1u);
+    let a2 = texel(tris, sa, 2u);
+    let b0 = texel(tris, sb, 0u);
+    let b1 = texel(tris, sb, 1u);
+    let b2 = texel(tris, sb, 2u);
+    let r = tri_tri(a0.xyz, a1.xyz, a2.xyz, b0.xyz, b1.xyz, b2.xyz);
+    if r != TRI_DISJOINT {
+        let o = atomicAdd(&state.out, 1u);
+        if o < params.caps.y {
+            var tag = u32(b0.w);
+            if r == TRI_UNCERTAIN {
+                tag = tag | UNCERTAIN_FLAG;
             }
+            frontier_out[o] = vec4<u32>(entry.x, u32(a0.w), tag, 0u);
         }
     }
 }

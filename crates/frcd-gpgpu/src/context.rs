@@ -18,7 +18,8 @@ pub(crate) const BOX_TILE: u32 = 64;
 /// [`GpuContext::from_adapter`]): the downlevel flags `COMPUTE_SHADERS` and `INDIRECT_EXECUTION`.
 pub fn requirements() -> wgpu::Limits {
     wgpu::Limits {
-        // traverse.wgsl: frontier in/out, state, output, pair table.
+        // traverse.wgsl: frontier in/out (triangle list and output in the triangle pass),
+        // state, triangle list, pair table.
         max_storage_buffers_per_shader_stage: 5,
         // The arena: nodes, triangles.
         max_sampled_textures_per_shader_stage: 2,
@@ -62,8 +63,12 @@ pub(crate) struct Pipelines {
     pub ctrl_bgl: wgpu::BindGroupLayout,
     pub boxes_bgl: wgpu::BindGroupLayout,
     pub traverse: wgpu::ComputePipeline,
+    /// traverse.wgsl's triangle pass (one listed triangle pair per invocation).
+    pub triangles: wgpu::ComputePipeline,
     pub init: wgpu::ComputePipeline,
     pub prepare: wgpu::ComputePipeline,
+    /// control.wgsl's arguments of the triangle pass.
+    pub prepare_tris: wgpu::ComputePipeline,
     pub boxes: wgpu::ComputePipeline,
     pub sweep_bgl: wgpu::BindGroupLayout,
     /// sweep.wgsl's passes: keys, sort_local, sort_global, gather, sweep.
@@ -488,8 +493,20 @@ impl Pipelines {
                 &traverse_mod,
                 "traverse",
             ),
+            triangles: pipeline(
+                "frcd-gpgpu triangles",
+                &trav_layout,
+                &traverse_mod,
+                "triangles",
+            ),
             init: pipeline("frcd-gpgpu init", &ctrl_layout, &control_mod, "init"),
             prepare: pipeline("frcd-gpgpu prepare", &ctrl_layout, &control_mod, "prepare"),
+            prepare_tris: pipeline(
+                "frcd-gpgpu prepare_tris",
+                &ctrl_layout,
+                &control_mod,
+                "prepare_tris",
+            ),
             boxes: pipeline("frcd-gpgpu boxes", &boxes_layout, &boxes_mod, "overlap"),
             sweep: ["make_keys", "sort_local", "sort_global", "gather", "sweep"]
                 .map(|entry| pipeline("frcd-gpgpu sweep", &sweep_layout, &sweep_mod, entry)),

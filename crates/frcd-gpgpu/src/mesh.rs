@@ -7,7 +7,9 @@ use std::sync::Arc;
 /// Shape of the context's mesh arena (see [`GpuContext::upload`]): every mesh of a context lives
 /// in one node texture and one triangle texture, so a whole batch of body pairs is traversed in
 /// one dispatch chain. `None`: the default (1,024 items per row, 64 rows per layer, clamped to
-/// the device's texture limits). Small values exercise the row and layer splitting in tests.
+/// the device's texture limits). Both are rounded down to powers of two (the shaders then find
+/// an item's texel with shifts and masks instead of integer divisions, which a software driver
+/// runs lane by lane). Small values exercise the row and layer splitting in tests.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ArenaOptions {
     /// Items (nodes or triangles) per texture row.
@@ -89,12 +91,13 @@ impl ArenaTex {
         limits: &wgpu::Limits,
     ) -> Result<Self, GpuError> {
         let dim = limits.max_texture_dimension_2d;
-        let per_row = opts
-            .items_per_row
-            .unwrap_or(1024)
-            .min(dim / texels_per_item)
-            .max(1);
-        let rows = opts.rows_per_layer.unwrap_or(64).min(dim).max(1);
+        let pow2_down = |x: u32| if x == 0 { 1 } else { 1u32 << x.ilog2() };
+        let per_row = pow2_down(
+            opts.items_per_row
+                .unwrap_or(1024)
+                .min(dim / texels_per_item),
+        );
+        let rows = pow2_down(opts.rows_per_layer.unwrap_or(64).min(dim));
         if dim < texels_per_item || limits.max_texture_array_layers < crate::pack::MIN_LAYERS {
             return Err(GpuError::Unsupported {
                 adapter: String::new(),
@@ -231,16 +234,18 @@ impl Arena {
             mapped_at_creation: true,
         });
         {
-            let words: [u32; 8] = [
-                nodes.layout.items_per_row,
-                nodes.layout.rows_per_layer,
-                0,
-                0,
-                tris.layout.items_per_row,
-                tris.layout.rows_per_layer,
-                0,
-                0,
-            ];
+            // Powers of two (see `ArenaTex::new`) and their logarithms, for `slot`'s shifts.
+            let shape = |l: &TexLayout| {
+                [
+                    l.items_per_row,
+                    l.rows_per_layer,
+                    l.items_per_row.trailing_zeros(),
+                    l.rows_per_layer.trailing_zeros(),
+                ]
+            };
+            let n = shape(&nodes.layout);
+            let t = shape(&tris.layout);
+            let words: [u32; 8] = [n[0], n[1], n[2], n[3], t[0], t[1], t[2], t[3]];
             layout
                 .slice(..)
                 .get_mapped_range_mut()

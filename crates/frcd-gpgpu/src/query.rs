@@ -11,6 +11,8 @@ const UNCERTAIN_FLAG: u32 = 0x8000_0000;
 const STATE_BYTES: u64 = std::mem::size_of::<State>() as u64;
 /// Bytes of one frontier or output entry (`vec4<u32>`).
 const ENTRY_BYTES: u64 = 16;
+/// Bytes of the `Params` uniform (prelude).
+const PARAMS_BYTES: u64 = std::mem::size_of::<Params>() as u64;
 /// Bytes of one `PairInfo` (prelude).
 const PAIR_BYTES: u64 = std::mem::size_of::<PairInfo>() as u64;
 /// Re-runs allowed after overflows before giving up (each at least doubles a buffer).
@@ -76,6 +78,7 @@ struct Buffers {
     ctx_id: u64,
     frontier_cap: u32,
     output_cap: u32,
+    tri_cap: u32,
     pair_cap: u32,
     frontier: [wgpu::Buffer; 2],
     state: wgpu::Buffer,
@@ -85,6 +88,8 @@ struct Buffers {
     pairs: wgpu::Buffer,
     staging: wgpu::Buffer,
     trav_bg: [wgpu::BindGroup; 2],
+    /// The triangle pass: triangle list in, output out.
+    tri_bg: wgpu::BindGroup,
     ctrl_bg: wgpu::BindGroup,
 }
 
@@ -94,6 +99,8 @@ struct Buffers {
 pub struct QueryScratch {
     frontier_cap: u32,
     output_cap: u32,
+    /// Triangle pairs of overlapping leaves, listed for the triangle pass.
+    tri_cap: u32,
     pair_cap: u32,
     bufs: Option<Buffers>,
 }
@@ -109,6 +116,7 @@ impl std::fmt::Debug for QueryScratch {
         f.debug_struct("QueryScratch")
             .field("frontier_capacity", &self.frontier_cap)
             .field("output_capacity", &self.output_cap)
+            .field("triangle_list_capacity", &self.tri_cap)
             .field("pair_capacity", &self.pair_cap)
             .finish()
     }
@@ -116,11 +124,13 @@ impl std::fmt::Debug for QueryScratch {
 
 impl QueryScratch {
     /// Scratch whose first buffers hold `frontier` node pairs per level and `output` triangle
-    /// pairs (at least 1 each). Too small is only slower: overflow re-runs the batch.
+    /// pairs (at least 1 each); the list of triangle pairs to test starts at four times the
+    /// frontier. Too small is only slower: overflow re-runs the batch.
     pub fn with_capacity(frontier: u32, output: u32) -> Self {
         Self {
             frontier_cap: frontier.max(1),
             output_cap: output.max(1),
+            tri_cap: frontier.max(1).saturating_mul(4),
             pair_cap: 16,
             bufs: None,
         }
@@ -140,6 +150,7 @@ impl QueryScratch {
             }
             if b.frontier_cap == self.frontier_cap
                 && b.output_cap == self.output_cap
+                && b.tri_cap == self.tri_cap
                 && b.pair_cap == self.pair_cap
             {
                 return Ok(());
@@ -157,10 +168,12 @@ impl QueryScratch {
         }
         let fsize = self.frontier_cap as u64 * ENTRY_BYTES;
         let osize = self.output_cap as u64 * ENTRY_BYTES;
+        let tsize = self.tri_cap as u64 * ENTRY_BYTES;
         let psize = self.pair_cap as u64 * PAIR_BYTES;
         ctx.check_storage(&[
             ("frontier", fsize),
             ("output", osize),
+            ("triangle list", tsize),
             ("pair table", psize),
         ])?;
         use wgpu::BufferUsages as B;
@@ -173,14 +186,15 @@ impl QueryScratch {
         let state = buf("frcd-gpgpu state", STATE_BYTES, B::STORAGE | B::COPY_SRC);
         let args = buf("frcd-gpgpu indirect args", 16, B::STORAGE | B::INDIRECT);
         let out = buf("frcd-gpgpu output", osize, B::STORAGE | B::COPY_SRC);
-        let params = buf("frcd-gpgpu params", 16, B::UNIFORM | B::COPY_DST);
+        let tris = buf("frcd-gpgpu triangle list", tsize, B::STORAGE);
+        let params = buf("frcd-gpgpu params", PARAMS_BYTES, B::UNIFORM | B::COPY_DST);
         let pairs = buf("frcd-gpgpu pair table", psize, B::STORAGE | B::COPY_DST);
         let staging = buf(
             "frcd-gpgpu staging",
             STATE_BYTES + osize,
             B::MAP_READ | B::COPY_DST,
         );
-        let trav = |input: &wgpu::Buffer, output: &wgpu::Buffer| {
+        let trav = |input: &wgpu::Buffer, output: &wgpu::Buffer, list: &wgpu::Buffer| {
             d.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("frcd-gpgpu traversal"),
                 layout: &ctx.pipes.trav_bgl,
@@ -188,16 +202,19 @@ impl QueryScratch {
                     crate::context::entry(0, input),
                     crate::context::entry(1, output),
                     crate::context::entry(2, &state),
-                    crate::context::entry(3, &out),
+                    crate::context::entry(3, list),
                     crate::context::entry(4, &params),
                     crate::context::entry(5, &pairs),
                 ],
             })
         };
         let trav_bg = [
-            trav(&frontier[0], &frontier[1]),
-            trav(&frontier[1], &frontier[0]),
+            trav(&frontier[0], &frontier[1], &tris),
+            trav(&frontier[1], &frontier[0], &tris),
         ];
+        // The triangle pass reads the list and writes the output; its binding 3 is unused
+        // (a frontier buffer is bound there to fill the layout).
+        let tri_bg = trav(&tris, &out, &frontier[0]);
         let ctrl_bg = d.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("frcd-gpgpu control"),
             layout: &ctx.pipes.ctrl_bgl,
@@ -211,6 +228,7 @@ impl QueryScratch {
             ctx_id: ctx.id,
             frontier_cap: self.frontier_cap,
             output_cap: self.output_cap,
+            tri_cap: self.tri_cap,
             pair_cap: self.pair_cap,
             frontier,
             state,
@@ -220,6 +238,7 @@ impl QueryScratch {
             pairs,
             staging,
             trav_bg,
+            tri_bg,
             ctrl_bg,
         });
         Ok(())
@@ -530,6 +549,7 @@ impl GpuContext {
             0,
             bytemuck::bytes_of(&Params {
                 caps: [bufs.frontier_cap, bufs.output_cap, max_groups, n],
+                caps2: [bufs.tri_cap, 0, 0, 0],
             }),
         );
         if n == 0 {
@@ -567,6 +587,14 @@ impl GpuContext {
                 pass.set_bind_group(0, &bufs.ctrl_bg, &[]);
                 pass.dispatch_workgroups(1, 1, 1);
             }
+            // Every listed triangle pair, one per invocation.
+            pass.set_pipeline(&self.pipes.prepare_tris);
+            pass.set_bind_group(0, &bufs.ctrl_bg, &[]);
+            pass.dispatch_workgroups(1, 1, 1);
+            pass.set_pipeline(&self.pipes.triangles);
+            pass.set_bind_group(0, &arena_bg, &[]);
+            pass.set_bind_group(1, &bufs.tri_bg, &[]);
+            pass.dispatch_workgroups_indirect(&bufs.args, 0);
         }
         enc.copy_buffer_to_buffer(&bufs.state, 0, &bufs.staging, 0, STATE_BYTES);
         let out_bytes = bufs.output_cap as u64 * ENTRY_BYTES;
@@ -612,11 +640,17 @@ impl GpuContext {
                 scratch.output_cap = out_count.max(bufs.output_cap.saturating_mul(2));
                 rerun = true;
             }
+            if state.tris > bufs.tri_cap {
+                scratch.tri_cap = state.tris.max(bufs.tri_cap.saturating_mul(2));
+                rerun = true;
+            }
             if rerun {
                 log::debug!(
-                    "frcd-gpgpu: overflow (frontier {needed}/{}, output {out_count}/{}), re-running",
+                    "frcd-gpgpu: overflow (frontier {needed}/{}, output {out_count}/{}, triangle list {}/{}), re-running",
                     bufs.frontier_cap,
-                    bufs.output_cap
+                    bufs.output_cap,
+                    state.tris,
+                    bufs.tri_cap
                 );
                 answer.reruns += 1;
                 if answer.reruns > MAX_RERUNS {

@@ -307,8 +307,9 @@ fn overflow_is_detected_and_the_query_rerun() {
 
 #[test]
 fn meshes_split_across_rows_and_layers() {
-    // A tiny arena (3 items per row, 4 rows per layer): every mesh spans many rows and layers,
-    // and the arena grows (a GPU copy of the old layers) several times while meshes are in use.
+    // A tiny arena (3 items per row, rounded down to 2, and 4 rows per layer): every mesh spans
+    // many rows and layers, and the arena grows (a GPU copy of the old layers) several times
+    // while meshes are in use.
     let opts = HeadlessOptions {
         arena: ArenaOptions {
             items_per_row: Some(3),

@@ -17,18 +17,21 @@ struct State {
     // Levels that had work, and node pairs tested in total (control pass).
     levels: u32,
     pairs_tested: u32,
+    // Triangle pairs appended to the triangle list (may exceed the capacity: overflow).
+    tris: atomic<u32>,
     pad0: u32,
-    pad1: u32,
 }
 
 struct Params {
     // frontier capacity, output capacity, max workgroups per dimension, pairs in the batch
     caps: vec4<u32>,
+    // triangle list capacity, unused, unused, unused
+    caps2: vec4<u32>,
 }
 
 // Shape of the mesh arena textures.
 struct Arena {
-    // items per texture row, rows per layer, unused, unused
+    // items per texture row, rows per layer (both powers of two), log2 of each
     node_layout: vec4<u32>,
     tri_layout: vec4<u32>,
 }

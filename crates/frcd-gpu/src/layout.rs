@@ -21,10 +21,10 @@ pub struct State {
     pub levels: u32,
     /// Node pairs tested.
     pub pairs_tested: u32,
+    /// Triangle pairs appended to the triangle list (may exceed its capacity: overflow).
+    pub tris: u32,
     /// Padding.
     pub pad0: u32,
-    /// Padding.
-    pub pad1: u32,
 }
 
 /// `Params`: capacities of one frcd-gpgpu batch.
@@ -33,15 +33,17 @@ pub struct State {
 pub struct Params {
     /// Frontier capacity, output capacity, max workgroups per dimension, pairs in the batch.
     pub caps: [u32; 4],
+    /// Triangle list capacity, then unused.
+    pub caps2: [u32; 4],
 }
 
 /// `Arena`: shape of frcd-gpgpu's mesh arena textures.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
 pub struct Arena {
-    /// Nodes per row, rows per layer, unused, unused.
+    /// Nodes per row, rows per layer (both powers of two), log2 of each.
     pub node_layout: [u32; 4],
-    /// Triangles per row, rows per layer, unused, unused.
+    /// Triangles per row, rows per layer (both powers of two), log2 of each.
     pub tri_layout: [u32; 4],
 }
 
@@ -144,10 +146,13 @@ pub fn mirrors() -> Vec<MirrorLayout> {
             needed: u32,
             levels: u32,
             pairs_tested: u32,
-            pad0: u32,
-            pad1: u32
+            tris: u32,
+            pad0: u32
         }),
-        m!(Params { caps: [u32; 4] }),
+        m!(Params {
+            caps: [u32; 4],
+            caps2: [u32; 4]
+        }),
         m!(Arena {
             node_layout: [u32; 4],
             tri_layout: [u32; 4]
