@@ -52,6 +52,11 @@ fn prepare() {
     }
     let n = atomicLoad(&state.next);
     atomicStore(&state.next, 0u);
+    // The triangle list's counter stops at 2^31 (beyond every capacity: the CPU re-runs or
+    // refuses); one level adds less than 2^31 (checked on the CPU), so it never wraps.
+    if atomicLoad(&state.tris) >= 0x80000000u {
+        atomicStore(&state.tris, 0x80000000u);
+    }
     state.needed = max(state.needed, n);
     // On overflow only the first `cap` entries were written; run those (the answer is discarded
     // and the batch re-run with a larger frontier, but `needed` keeps growing meanwhile).

@@ -302,6 +302,8 @@ pub struct GpuMesh {
     pub(crate) node_base: u32,
     pub(crate) tri_base: u32,
     pub(crate) depth: u32,
+    /// Most triangles in one leaf (a leaf pair lists up to the product of two such counts).
+    pub(crate) max_leaf: u32,
     /// The tree's mesh (shared, not copied), for the CPU's exact re-decision.
     pub(crate) mesh: Arc<TriMesh>,
     bytes: u64,
@@ -333,10 +335,31 @@ impl GpuMesh {
     }
 }
 
+/// Most triangles one leaf of an uploaded tree may hold: a leaf pair lists every triangle pair
+/// of its two leaves (up to 65,536) in one append, and the counters must not wrap (see
+/// `query`). Trees for the GPU have small leaves (the hybrid checker's: 4 triangles).
+pub const MAX_LEAF_TRIANGLES: u32 = 256;
+
 impl GpuContext {
     /// Uploads a tree (nodes and triangles, local frame, f32 rounded outward) once into the
     /// context's arena; queries then upload only poses. The arena grows (a GPU copy) when full.
+    /// A tree with a leaf of more than [`MAX_LEAF_TRIANGLES`] triangles is
+    /// [`GpuError::MeshTooLarge`].
     pub fn upload(&self, tree: &ObbTree) -> Result<GpuMesh, GpuError> {
+        let max_leaf = tree
+            .nodes()
+            .iter()
+            .filter(|n| n.is_leaf())
+            .map(|n| n.count)
+            .max()
+            .unwrap_or(0);
+        if max_leaf > MAX_LEAF_TRIANGLES {
+            return Err(GpuError::MeshTooLarge {
+                what: "triangles in one leaf of the tree",
+                needed: max_leaf as u64,
+                limit: MAX_LEAF_TRIANGLES as u64,
+            });
+        }
         let mut arena = self.arena.lock().unwrap_or_else(|e| e.into_inner());
         let PackedTree {
             nodes,
@@ -386,6 +409,7 @@ impl GpuContext {
             node_base: node_base as u32,
             tri_base: tri_base as u32,
             depth,
+            max_leaf,
             mesh: tree.mesh().clone(),
             bytes,
         })

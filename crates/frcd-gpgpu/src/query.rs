@@ -256,6 +256,8 @@ struct Prepared {
     frames: Vec<RelativeFrame>,
     tris: Vec<TrianglePair>,
     levels: u32,
+    /// Most triangle pairs one leaf pair of the batch lists.
+    leaf_pairs: u64,
 }
 
 /// The relative pose as the shader's `PairInfo`: rows of R, then t (f32, rounded to nearest;
@@ -500,6 +502,7 @@ impl GpuContext {
             frames: Vec::with_capacity(pairs.len()),
             tris: Vec::with_capacity(pairs.len()),
             levels: 0,
+            leaf_pairs: 0,
         };
         for (k, &(a, pose_a, b, pose_b)) in pairs.iter().enumerate() {
             for m in [a, b] {
@@ -528,6 +531,7 @@ impl GpuContext {
             p.frames.push(frame);
             p.tris.push((a.mesh.clone(), b.mesh.clone()));
             p.levels = p.levels.max(a.depth.max(b.depth));
+            p.leaf_pairs = p.leaf_pairs.max(a.max_leaf as u64 * b.max_leaf as u64);
         }
         Ok(p)
     }
@@ -543,6 +547,17 @@ impl GpuContext {
         let n = p.frames.len() as u32;
         scratch.ensure(self, n)?;
         let bufs = scratch.bufs.as_ref().expect("ensured");
+        // One level lists at most frontier × leaf pair triangle pairs; `prepare` clamps the
+        // triangle counter at 2^31 after every level, so below 2^31 per level it never wraps
+        // (a wrapped counter would look like a short list: pairs lost).
+        let per_level = bufs.frontier_cap as u64 * p.leaf_pairs;
+        if per_level >= 1 << 31 {
+            return Err(GpuError::CapacityExceeded {
+                what: "triangle pairs one level may list (frontier capacity × leaf sizes)",
+                needed: per_level,
+                limit: (1 << 31) - 1,
+            });
+        }
         let max_groups = self.limits.max_compute_workgroups_per_dimension;
         self.queue.write_buffer(
             &bufs.params,

@@ -716,6 +716,35 @@ fn meshes_that_do_not_fit_are_a_typed_error() {
 }
 
 #[test]
+fn trees_with_huge_leaves_are_a_typed_error() {
+    // A leaf pair lists all its triangle pairs in one append: leaves above the limit are
+    // refused at upload (the list's counter could otherwise wrap and lose pairs).
+    let Some(ctx) = shared() else { return };
+    let mesh = shapes::icosphere(1.0, 3);
+    let limit = frcd_gpgpu::MAX_LEAF_TRIANGLES;
+    assert!(mesh.triangle_count() > limit as usize);
+    let leaves = |max_leaf_triangles| BuildOptions {
+        max_leaf_triangles,
+        ..BuildOptions::default()
+    };
+    let t = ObbTree::build(&mesh, &leaves(u32::MAX));
+    assert!(matches!(
+        ctx.upload(&t),
+        Err(GpuError::MeshTooLarge { needed, .. }) if needed == mesh.triangle_count() as u64
+    ));
+    // Leaves at the limit still upload and answer.
+    let t = ObbTree::build(&mesh, &leaves(limit));
+    let g = ctx.upload(&t).unwrap();
+    let pb = Pose::from_translation(DVec3::new(0.5, 0.1, 0.0));
+    let got = ctx
+        .collide(&g, &Pose::IDENTITY, &g, &pb, &mut QueryScratch::default())
+        .unwrap();
+    let want = oracle::pairs(&mesh, &Pose::IDENTITY, &mesh, &pb);
+    assert!(!want.is_empty());
+    assert_eq!(got.pairs, want);
+}
+
+#[test]
 fn public_types_are_send_and_sync() {
     fn check<T: Send + Sync>() {}
     check::<GpuContext>();
