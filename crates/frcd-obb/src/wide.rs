@@ -366,6 +366,9 @@ pub(crate) fn separation4(a: &ALanes, b: &BLanes, s: f32, active: u32) -> F4 {
             .add(sv);
         best = best.max(t[i].abs().sub(rad));
     }
+    if best.positive() & active == active {
+        return best;
+    }
     // B's faces: P_j · d.
     for j in 0..3 {
         let proj = p[j][0]
