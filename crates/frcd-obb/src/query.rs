@@ -5,7 +5,7 @@
 use crate::sat::{self, Placed, SLACK_REL};
 use crate::solid::point_inside;
 use crate::tree::ObbTree;
-use crate::wide::{self, ALanes, Placed32, Sat32};
+use crate::wide::{self, ALanes, NO_QUAD, Placed32, Sat32, quad_ids};
 use frcd_geom::{Aabb, DMat3, DVec3, Pose, Triangle};
 use frcd_tritri::{Contact, Method};
 
@@ -623,9 +623,15 @@ impl<'a> Ctx<'a> {
                 na.size2() >= nb.size2()
             };
             if split_a {
-                let (ids, n) = quad(&a.nodes, i);
+                let qa = a.quad_of[i as usize];
+                let (ids, n, lanes) = if qa != NO_QUAD {
+                    let q = &a.quads[(qa >> 2) as usize];
+                    (q.ids, (qa & 3) as usize + 1, ALanes::from_quad(q))
+                } else {
+                    let (ids, n) = quad_ids(&a.nodes, i);
+                    (ids, n, ALanes::gather(&a.nodes, &ids, n))
+                };
                 self.counters.box_tests += n as u64;
-                let lanes = ALanes::gather(&a.nodes, &ids, n);
                 let pb = stack.placed32[p as usize].splat();
                 let m = wide::separation4(&lanes, &pb, s, (1 << n) - 1);
                 if front.is_none() {
@@ -656,10 +662,16 @@ impl<'a> Ctx<'a> {
                     }
                 }
             } else {
-                let (ids, n) = quad(&b.nodes, j);
+                let qb = b.quad_of[j as usize];
+                let (ids, n, lanes) = if qb != NO_QUAD {
+                    let q = &b.quads[(qb >> 2) as usize];
+                    (q.ids, (qb & 3) as usize + 1, sat.place_quad(q))
+                } else {
+                    let (ids, n) = quad_ids(&b.nodes, j);
+                    (ids, n, sat.place_lanes(&b.nodes, &ids, n))
+                };
                 self.counters.box_tests += n as u64;
                 self.counters.placements += n as u64;
-                let lanes = sat.place_lanes(&b.nodes, &ids, n);
                 let m = wide::separation4(&ALanes::splat(na), &lanes, s, (1 << n) - 1);
                 if front.is_none() {
                     // Branch-free, as above; placed boxes stay in step with the pairs.
@@ -705,26 +717,6 @@ impl<'a> Ctx<'a> {
         }
         contained(self.a, self.b, &self.frame, 0x5EED)
     }
-}
-
-/// The nodes two levels below internal node `n` (a child that is a leaf stands for itself):
-/// 2 to 4 ids, left to right, and their number.
-#[inline(always)]
-fn quad(nodes: &[crate::nodes::TNode], n: u32) -> ([u32; 4], usize) {
-    let mut ids = [0u32; 4];
-    let mut len = 0;
-    for c in [n + 1, nodes[n as usize].right()] {
-        let cn = &nodes[c as usize];
-        if cn.is_leaf() {
-            ids[len] = c;
-            len += 1;
-        } else {
-            ids[len] = c + 1;
-            ids[len + 1] = cn.right();
-            len += 2;
-        }
-    }
-    (ids, len)
 }
 
 /// Solid-mode containment with everything in A's frame (B's points and triangles mapped by

@@ -91,6 +91,11 @@ pub struct ObbTree {
     pub(crate) uid: u64,
     /// Every edge has an even number of incident triangles (parity tests are meaningful).
     pub(crate) closed: bool,
+    /// The derived four-lane layer of the wide traversal (`wide.rs`): the nodes two levels
+    /// below each internal node at even depth, in lanes.
+    pub(crate) quads: Vec<crate::wide::Quad>,
+    /// Per node: its quad's index · 4 + lanes − 1, or [`crate::wide::NO_QUAD`].
+    pub(crate) quad_of: Vec<u32>,
     /// Distance volumes (one rectangle swept sphere per node), built on the first distance or
     /// tolerance query (`crate::distance`), so collision-only users pay no memory.
     pub(crate) distance_volumes: std::sync::OnceLock<Vec<crate::distance::rss::DNode>>,
@@ -140,7 +145,10 @@ impl ObbTree {
         let sphere = Sphere::from_points(points);
         let aabb = mesh.aabb();
         let radius_from_origin = aabb.min.abs().max(aabb.max.abs()).length();
+        let (quads, quad_of) = crate::wide::build_quads(&nodes);
         ObbTree {
+            quads,
+            quad_of,
             nodes,
             order,
             ends,
@@ -278,6 +286,8 @@ impl ObbTree {
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Self>()
             + self.nodes.capacity() * std::mem::size_of::<TNode>()
+            + self.quads.capacity() * std::mem::size_of::<crate::wide::Quad>()
+            + self.quad_of.capacity() * std::mem::size_of::<u32>()
             + self.order.capacity() * std::mem::size_of::<u32>()
             + self.ends.capacity() * std::mem::size_of::<u64>()
             + self.component_points.capacity() * std::mem::size_of::<DVec3>()

@@ -127,6 +127,82 @@ impl D4 {
     }
 }
 
+/// The (2 to 4) nodes two levels below an internal node, stored in lanes (structure of
+/// arrays) so that a traversal step loads them without gathering four scattered nodes: the
+/// derived layer of [`crate::ObbTree`], kept for the internal nodes at even depth (the ones a
+/// traversal from the roots expands; others are gathered). Unused lanes repeat lane 0.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C, align(64))]
+pub(crate) struct Quad {
+    /// `u[i][x]`: coordinate `x` of axis `i`.
+    pub u: [[F4; 3]; 3],
+    pub h: [F4; 3],
+    pub c: [F4; 3],
+    /// The binary node ids of the lanes.
+    pub ids: [u32; 4],
+}
+
+const _: () = assert!(std::mem::size_of::<Quad>() == 256);
+
+/// No quad for this node (leaves, odd depth).
+pub(crate) const NO_QUAD: u32 = u32::MAX;
+
+/// The nodes two levels below internal node `n` (a child that is a leaf stands for itself):
+/// 2 to 4 ids, left to right, and their number.
+#[inline(always)]
+pub(crate) fn quad_ids(nodes: &[TNode], n: u32) -> ([u32; 4], usize) {
+    let mut ids = [0u32; 4];
+    let mut len = 0;
+    for c in [n + 1, nodes[n as usize].right()] {
+        let cn = &nodes[c as usize];
+        if cn.is_leaf() {
+            ids[len] = c;
+            len += 1;
+        } else {
+            ids[len] = c + 1;
+            ids[len + 1] = cn.right();
+            len += 2;
+        }
+    }
+    (ids, len)
+}
+
+/// The quad layer of a tree: one [`Quad`] per internal node at even depth, and per node its
+/// quad's index times four plus the lane count minus one, or [`NO_QUAD`].
+pub(crate) fn build_quads(nodes: &[TNode]) -> (Vec<Quad>, Vec<u32>) {
+    let mut depth = vec![0u32; nodes.len()];
+    let mut of = vec![NO_QUAD; nodes.len()];
+    let mut quads = Vec::new();
+    for (n, node) in nodes.iter().enumerate() {
+        if node.is_leaf() {
+            continue;
+        }
+        // Children follow their parent in depth-first order: one forward pass sets depths.
+        depth[n + 1] = depth[n] + 1;
+        depth[node.right() as usize] = depth[n] + 1;
+        if depth[n] % 2 != 0 {
+            continue;
+        }
+        let (ids, len) = quad_ids(nodes, n as u32);
+        let mut q = Quad::default();
+        for k in 0..4 {
+            let id = ids[if k < len { k } else { 0 }];
+            let src = &nodes[id as usize];
+            for i in 0..3 {
+                for x in 0..3 {
+                    q.u[i][x].0[k] = src.u[i][x];
+                }
+                q.h[i].0[k] = src.h[i];
+                q.c[i].0[k] = src.c[i];
+            }
+            q.ids[k] = id;
+        }
+        of[n] = (quads.len() as u32) << 2 | (len as u32 - 1);
+        quads.push(q);
+    }
+    (quads, of)
+}
+
 /// The f32 test of one query (module docs).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Sat32 {
@@ -208,6 +284,41 @@ impl Sat32 {
                     .add(F4::splat(ms[kk][1]).mul(v[j][1]))
                     .add(F4::splat(ms[kk][2]).mul(v[j][2]));
             }
+        }
+        out
+    }
+
+    /// The nodes of a quad of B placed in A's frame, one per lane (the same operations as
+    /// [`Sat32::place_lanes`]).
+    #[inline(always)]
+    pub fn place_quad(&self, q: &Quad) -> BLanes {
+        let mut out = BLanes::default();
+        let ms = &self.ms;
+        for j in 0..3 {
+            for kk in 0..3 {
+                out.p[j][kk] = F4::splat(ms[kk][0])
+                    .mul(q.u[j][0])
+                    .add(F4::splat(ms[kk][1]).mul(q.u[j][1]))
+                    .add(F4::splat(ms[kk][2]).mul(q.u[j][2]));
+            }
+        }
+        out.h = q.h;
+        // Centres in f64: M c + t, row by row as glam's `DMat3 * DVec3` (the same f64 value as
+        // `place`, whose rounding the query slack covers either way).
+        let m = &self.m;
+        let mut c = [[0.0f64; 4]; 3];
+        for x in 0..3 {
+            for k in 0..4 {
+                c[x][k] = q.c[x].0[k] as f64;
+            }
+        }
+        for r in 0..3 {
+            let (m0, m1, m2) = (m.x_axis[r], m.y_axis[r], m.z_axis[r]);
+            let mut v = [0.0f64; 4];
+            for k in 0..4 {
+                v[k] = m0 * c[0][k] + m1 * c[1][k] + m2 * c[2][k] + self.t[r];
+            }
+            out.c[r] = D4(v);
         }
         out
     }
@@ -296,6 +407,21 @@ impl ALanes {
                 out.h[i].0[k] = node.h[i];
                 out.c[i].0[k] = node.c[i] as f64;
             }
+        }
+        out
+    }
+
+    /// The nodes of a quad, one per lane.
+    #[inline(always)]
+    pub fn from_quad(q: &Quad) -> ALanes {
+        let mut out = ALanes {
+            u: q.u,
+            h: q.h,
+            ..ALanes::default()
+        };
+        for x in 0..3 {
+            let c = &q.c[x].0;
+            out.c[x] = D4([c[0] as f64, c[1] as f64, c[2] as f64, c[3] as f64]);
         }
         out
     }
@@ -748,6 +874,61 @@ mod tests {
         assert_eq!(check4(&[big; 4], "huge")[0], (false, false));
     }
 
+    /// The quad layer holds exactly the nodes two levels below every internal node at even
+    /// depth, and its lanes give the gathered lanes' answers bit for bit.
+    #[test]
+    fn quads_equal_the_gathered_nodes() {
+        let mesh = frcd_geom::shapes::icosphere(1.0, 3);
+        for leaf in [1, 2, 3] {
+            let opts = crate::BuildOptions {
+                max_leaf_triangles: leaf,
+                ..Default::default()
+            };
+            let tree = crate::ObbTree::build(&mesh, &opts);
+            let nodes = &tree.nodes;
+            let sat = Sat32::new(
+                DMat3::from_quat(DQuat::from_rotation_x(0.4)),
+                DVec3::new(0.3, -0.2, 0.1),
+                1e-13,
+                3.0,
+            )
+            .unwrap();
+            let (mut with, mut depth) = (0, vec![0u32; nodes.len()]);
+            for n in 0..nodes.len() {
+                let q = tree.quad_of[n];
+                if nodes[n].is_leaf() {
+                    assert_eq!(q, NO_QUAD);
+                    continue;
+                }
+                depth[n + 1] = depth[n] + 1;
+                depth[nodes[n].right() as usize] = depth[n] + 1;
+                assert_eq!(q == NO_QUAD, depth[n] % 2 == 1, "node {n}");
+                if q == NO_QUAD {
+                    continue;
+                }
+                with += 1;
+                let quad = &tree.quads[(q >> 2) as usize];
+                let (ids, len) = quad_ids(nodes, n as u32);
+                assert_eq!((q & 3) as usize + 1, len);
+                assert_eq!(quad.ids[..len], ids[..len]);
+                let g = ALanes::gather(nodes, &ids, len);
+                let f = ALanes::from_quad(quad);
+                let b = sat.place(&nodes[0]).splat();
+                let mask = (1 << len) - 1;
+                let (x, y) = (separation4(&g, &b, sat.s(), mask), separation4(&f, &b, sat.s(), mask));
+                assert_eq!(x.0[..len], y.0[..len]);
+                let a = ALanes::splat(&nodes[n]);
+                let (pl, pq) = (sat.place_lanes(nodes, &ids, len), sat.place_quad(quad));
+                let (x, y) = (separation4(&a, &pl, sat.s(), mask), separation4(&a, &pq, sat.s(), mask));
+                assert_eq!(x.0[..len], y.0[..len]);
+                for k in 0..len {
+                    assert_eq!(pl.lane(k).c, pq.lane(k).c);
+                }
+            }
+            assert!(with > 10, "{with}");
+        }
+    }
+
     #[test]
     fn hand_made_cases() {
         let sat = |t: DVec3| Sat32::new(DMat3::IDENTITY, t, 4.0 * SLACK_REL, 4.0).unwrap();
@@ -786,5 +967,60 @@ mod tests {
             0xF,
         );
         assert_eq!(r.positive(), 0b1100, "{r:?}");
+    }
+}
+
+#[cfg(test)]
+mod timing {
+    use super::*;
+    use crate::nodes::compact_box;
+    use frcd_geom::{DQuat, Obb};
+
+    /// Not a test: ns per four-lane call, hot data (`cargo test --release -- --ignored`).
+    #[test]
+    #[ignore]
+    fn kernel_time() {
+        let mut nodes = Vec::new();
+        for k in 0..64 {
+            let q = DQuat::from_axis_angle(DVec3::new(1.0, 0.3 * k as f64, -0.2).normalize(), 0.1 * k as f64);
+            let (c, h, u) = compact_box(&Obb {
+                center: DVec3::new(0.1 * k as f64, 0.05 * (k % 7) as f64, 0.0),
+                axes: DMat3::from_quat(q),
+                half_extents: DVec3::new(0.3, 0.2, 0.1 + 0.01 * k as f64),
+            });
+            nodes.push(TNode { c, h, u, link: 0 });
+        }
+        let sat = Sat32::new(DMat3::from_quat(DQuat::from_rotation_z(0.3)), DVec3::new(0.5, 0.2, 0.1), 1e-13, 10.0).unwrap();
+        for (what, dist) in [("near", 0.0), ("far", 3.0)] {
+            let pb = sat.place(&nodes[5]);
+            let mut pb = pb;
+            pb.c += DVec3::splat(dist);
+            let bl = pb.splat();
+            let n = 4_000_000u32;
+            let s = std::time::Instant::now();
+            let mut acc = 0u32;
+            for k in 0..n {
+                let b = (k as usize * 4) % 60;
+                let ids = [b as u32, b as u32 + 1, b as u32 + 2, b as u32 + 3];
+                let al = ALanes::gather(&nodes, &ids, 4);
+                acc += separation4(&al, std::hint::black_box(&bl), sat.s(), 0xF).positive();
+            }
+            let e = s.elapsed().as_secs_f64() * 1e9 / n as f64;
+            let s2 = std::time::Instant::now();
+            for k in 0..n {
+                let b = (k as usize * 4) % 60;
+                let ids = [b as u32, b as u32 + 1, b as u32 + 2, b as u32 + 3];
+                let bl = sat.place_lanes(&nodes, &ids, 4);
+                acc += separation4(&ALanes::splat(&nodes[k as usize % 64]), std::hint::black_box(&bl), sat.s(), 0xF).positive();
+            }
+            let e2 = s2.elapsed().as_secs_f64() * 1e9 / n as f64;
+            let pre: Vec<ALanes> = (0..15).map(|b| ALanes::gather(&nodes, &[4 * b, 4 * b + 1, 4 * b + 2, 4 * b + 3], 4)).collect();
+            let s3 = std::time::Instant::now();
+            for k in 0..n {
+                acc += separation4(&pre[k as usize % 15], std::hint::black_box(&bl), sat.s(), 0xF).positive();
+            }
+            let e3 = s3.elapsed().as_secs_f64() * 1e9 / n as f64;
+            eprintln!("{what}: A lanes {e:.1} ns per call (pre-gathered {e3:.1}), B lanes placed {e2:.1} ns per call ({acc})");
+        }
     }
 }
