@@ -915,11 +915,17 @@ mod tests {
                 let f = ALanes::from_quad(quad);
                 let b = sat.place(&nodes[0]).splat();
                 let mask = (1 << len) - 1;
-                let (x, y) = (separation4(&g, &b, sat.s(), mask), separation4(&f, &b, sat.s(), mask));
+                let (x, y) = (
+                    separation4(&g, &b, sat.s(), mask),
+                    separation4(&f, &b, sat.s(), mask),
+                );
                 assert_eq!(x.0[..len], y.0[..len]);
                 let a = ALanes::splat(&nodes[n]);
                 let (pl, pq) = (sat.place_lanes(nodes, &ids, len), sat.place_quad(quad));
-                let (x, y) = (separation4(&a, &pl, sat.s(), mask), separation4(&a, &pq, sat.s(), mask));
+                let (x, y) = (
+                    separation4(&a, &pl, sat.s(), mask),
+                    separation4(&a, &pq, sat.s(), mask),
+                );
                 assert_eq!(x.0[..len], y.0[..len]);
                 for k in 0..len {
                     assert_eq!(pl.lane(k).c, pq.lane(k).c);
@@ -982,7 +988,10 @@ mod timing {
     fn kernel_time() {
         let mut nodes = Vec::new();
         for k in 0..64 {
-            let q = DQuat::from_axis_angle(DVec3::new(1.0, 0.3 * k as f64, -0.2).normalize(), 0.1 * k as f64);
+            let q = DQuat::from_axis_angle(
+                DVec3::new(1.0, 0.3 * k as f64, -0.2).normalize(),
+                0.1 * k as f64,
+            );
             let (c, h, u) = compact_box(&Obb {
                 center: DVec3::new(0.1 * k as f64, 0.05 * (k % 7) as f64, 0.0),
                 axes: DMat3::from_quat(q),
@@ -990,7 +999,13 @@ mod timing {
             });
             nodes.push(TNode { c, h, u, link: 0 });
         }
-        let sat = Sat32::new(DMat3::from_quat(DQuat::from_rotation_z(0.3)), DVec3::new(0.5, 0.2, 0.1), 1e-13, 10.0).unwrap();
+        let sat = Sat32::new(
+            DMat3::from_quat(DQuat::from_rotation_z(0.3)),
+            DVec3::new(0.5, 0.2, 0.1),
+            1e-13,
+            10.0,
+        )
+        .unwrap();
         for (what, dist) in [("near", 0.0), ("far", 3.0)] {
             let pb = sat.place(&nodes[5]);
             let mut pb = pb;
@@ -1011,16 +1026,32 @@ mod timing {
                 let b = (k as usize * 4) % 60;
                 let ids = [b as u32, b as u32 + 1, b as u32 + 2, b as u32 + 3];
                 let bl = sat.place_lanes(&nodes, &ids, 4);
-                acc += separation4(&ALanes::splat(&nodes[k as usize % 64]), std::hint::black_box(&bl), sat.s(), 0xF).positive();
+                acc += separation4(
+                    &ALanes::splat(&nodes[k as usize % 64]),
+                    std::hint::black_box(&bl),
+                    sat.s(),
+                    0xF,
+                )
+                .positive();
             }
             let e2 = s2.elapsed().as_secs_f64() * 1e9 / n as f64;
-            let pre: Vec<ALanes> = (0..15).map(|b| ALanes::gather(&nodes, &[4 * b, 4 * b + 1, 4 * b + 2, 4 * b + 3], 4)).collect();
+            let pre: Vec<ALanes> = (0..15)
+                .map(|b| ALanes::gather(&nodes, &[4 * b, 4 * b + 1, 4 * b + 2, 4 * b + 3], 4))
+                .collect();
             let s3 = std::time::Instant::now();
             for k in 0..n {
-                acc += separation4(&pre[k as usize % 15], std::hint::black_box(&bl), sat.s(), 0xF).positive();
+                acc += separation4(
+                    &pre[k as usize % 15],
+                    std::hint::black_box(&bl),
+                    sat.s(),
+                    0xF,
+                )
+                .positive();
             }
             let e3 = s3.elapsed().as_secs_f64() * 1e9 / n as f64;
-            eprintln!("{what}: A lanes {e:.1} ns per call (pre-gathered {e3:.1}), B lanes placed {e2:.1} ns per call ({acc})");
+            eprintln!(
+                "{what}: A lanes {e:.1} ns per call (pre-gathered {e3:.1}), B lanes placed {e2:.1} ns per call ({acc})"
+            );
         }
     }
 }
