@@ -649,7 +649,7 @@ impl<'a> Ctx<'a> {
                     let mut len = top;
                     for k in (0..n).rev() {
                         stack.pairs[len] = (ids[k], j, p);
-                        len += !(m.0[k] > 0.0) as usize;
+                        len += 1 - (m.0[k] > 0.0) as usize;
                     }
                     stack.pairs.truncate(len);
                     continue;
@@ -690,7 +690,7 @@ impl<'a> Ctx<'a> {
                     for k in (0..n).rev() {
                         stack.placed32[q0 + len] = lanes.lane(k);
                         stack.pairs[top + len] = (i, ids[k], (q0 + len) as u32);
-                        len += !(m.0[k] > 0.0) as usize;
+                        len += 1 - (m.0[k] > 0.0) as usize;
                     }
                     stack.pairs.truncate(top + len);
                     stack.placed32.truncate(q0 + len);

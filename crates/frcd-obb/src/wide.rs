@@ -46,6 +46,10 @@
 //! overflow, and underflow stays below the floor of `s`; outside that range queries use the f64
 //! test. A NaN margin never separates (comparisons with NaN are false).
 
+// Index loops mirror the formulas (axis i, coordinate x, lane k) and keep the operation order
+// the error bound counts.
+#![allow(clippy::needless_range_loop)]
+
 use crate::nodes::{MARGIN_SCALE, TNode};
 use frcd_geom::{DMat3, DVec3};
 
@@ -180,7 +184,7 @@ pub(crate) fn build_quads(nodes: &[TNode]) -> (Vec<Quad>, Vec<u32>) {
         // Children follow their parent in depth-first order: one forward pass sets depths.
         depth[n + 1] = depth[n] + 1;
         depth[node.right() as usize] = depth[n] + 1;
-        if depth[n] % 2 != 0 {
+        if depth[n] & 1 != 0 {
             continue;
         }
         let (ids, len) = quad_ids(nodes, n as u32);
@@ -734,7 +738,7 @@ mod tests {
         let a = random_node(rng, ca, size);
         let cb = rng.v() * size - DVec3::splat(offset);
         let b = random_node(rng, cb, size);
-        let m = if rng.next() % 3 == 0 {
+        let m = if rng.next().is_multiple_of(3) {
             // Nearly parallel to A's axes.
             let eps = 1e-7 * rng.sym();
             a.axes() * DMat3::from_quat(DQuat::from_rotation_z(eps)) * b.axes().transpose()
@@ -973,85 +977,5 @@ mod tests {
             0xF,
         );
         assert_eq!(r.positive(), 0b1100, "{r:?}");
-    }
-}
-
-#[cfg(test)]
-mod timing {
-    use super::*;
-    use crate::nodes::compact_box;
-    use frcd_geom::{DQuat, Obb};
-
-    /// Not a test: ns per four-lane call, hot data (`cargo test --release -- --ignored`).
-    #[test]
-    #[ignore]
-    fn kernel_time() {
-        let mut nodes = Vec::new();
-        for k in 0..64 {
-            let q = DQuat::from_axis_angle(
-                DVec3::new(1.0, 0.3 * k as f64, -0.2).normalize(),
-                0.1 * k as f64,
-            );
-            let (c, h, u) = compact_box(&Obb {
-                center: DVec3::new(0.1 * k as f64, 0.05 * (k % 7) as f64, 0.0),
-                axes: DMat3::from_quat(q),
-                half_extents: DVec3::new(0.3, 0.2, 0.1 + 0.01 * k as f64),
-            });
-            nodes.push(TNode { c, h, u, link: 0 });
-        }
-        let sat = Sat32::new(
-            DMat3::from_quat(DQuat::from_rotation_z(0.3)),
-            DVec3::new(0.5, 0.2, 0.1),
-            1e-13,
-            10.0,
-        )
-        .unwrap();
-        for (what, dist) in [("near", 0.0), ("far", 3.0)] {
-            let pb = sat.place(&nodes[5]);
-            let mut pb = pb;
-            pb.c += DVec3::splat(dist);
-            let bl = pb.splat();
-            let n = 4_000_000u32;
-            let s = std::time::Instant::now();
-            let mut acc = 0u32;
-            for k in 0..n {
-                let b = (k as usize * 4) % 60;
-                let ids = [b as u32, b as u32 + 1, b as u32 + 2, b as u32 + 3];
-                let al = ALanes::gather(&nodes, &ids, 4);
-                acc += separation4(&al, std::hint::black_box(&bl), sat.s(), 0xF).positive();
-            }
-            let e = s.elapsed().as_secs_f64() * 1e9 / n as f64;
-            let s2 = std::time::Instant::now();
-            for k in 0..n {
-                let b = (k as usize * 4) % 60;
-                let ids = [b as u32, b as u32 + 1, b as u32 + 2, b as u32 + 3];
-                let bl = sat.place_lanes(&nodes, &ids, 4);
-                acc += separation4(
-                    &ALanes::splat(&nodes[k as usize % 64]),
-                    std::hint::black_box(&bl),
-                    sat.s(),
-                    0xF,
-                )
-                .positive();
-            }
-            let e2 = s2.elapsed().as_secs_f64() * 1e9 / n as f64;
-            let pre: Vec<ALanes> = (0..15)
-                .map(|b| ALanes::gather(&nodes, &[4 * b, 4 * b + 1, 4 * b + 2, 4 * b + 3], 4))
-                .collect();
-            let s3 = std::time::Instant::now();
-            for k in 0..n {
-                acc += separation4(
-                    &pre[k as usize % 15],
-                    std::hint::black_box(&bl),
-                    sat.s(),
-                    0xF,
-                )
-                .positive();
-            }
-            let e3 = s3.elapsed().as_secs_f64() * 1e9 / n as f64;
-            eprintln!(
-                "{what}: A lanes {e:.1} ns per call (pre-gathered {e3:.1}), B lanes placed {e2:.1} ns per call ({acc})"
-            );
-        }
     }
 }
