@@ -204,6 +204,8 @@ pub(crate) fn build_quads(nodes: &[TNode]) -> (Vec<Quad>, Vec<u32>) {
         of[n] = (quads.len() as u32) << 2 | (len as u32 - 1);
         quads.push(q);
     }
+    // The pushes may have doubled the capacity: keep only what is used.
+    quads.shrink_to_fit();
     (quads, of)
 }
 
