@@ -589,6 +589,7 @@ impl<'a> Ctx<'a> {
             }
             return false;
         }
+        let (qa_all, qb_all) = (a.quads(), b.quads());
         // Placed boxes are named by index, as in `descend64`: indices never decrease up the
         // stack, so when an entry is popped every box above its own is finished with.
         stack.placed32.push(pj);
@@ -630,9 +631,9 @@ impl<'a> Ctx<'a> {
                 na.size2() >= nb.size2()
             };
             if split_a {
-                let qa = a.quad_of[i as usize];
+                let qa = qa_all.of[i as usize];
                 let (ids, n, lanes) = if qa != NO_QUAD {
-                    let q = &a.quads[(qa >> 2) as usize];
+                    let q = &qa_all.quads[(qa >> 2) as usize];
                     (q.ids, (qa & 3) as usize + 1, ALanes::from_quad(q))
                 } else {
                     let (ids, n) = quad_ids(&a.nodes, i);
@@ -669,9 +670,9 @@ impl<'a> Ctx<'a> {
                     }
                 }
             } else {
-                let qb = b.quad_of[j as usize];
+                let qb = qb_all.of[j as usize];
                 let (ids, n, lanes) = if qb != NO_QUAD {
-                    let q = &b.quads[(qb >> 2) as usize];
+                    let q = &qb_all.quads[(qb >> 2) as usize];
                     (q.ids, (qb & 3) as usize + 1, sat.place_quad(q))
                 } else {
                     let (ids, n) = quad_ids(&b.nodes, j);

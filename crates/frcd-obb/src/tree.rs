@@ -92,10 +92,10 @@ pub struct ObbTree {
     /// Every edge has an even number of incident triangles (parity tests are meaningful).
     pub(crate) closed: bool,
     /// The derived four-lane layer of the wide traversal (`wide.rs`): the nodes two levels
-    /// below each internal node at even depth, in lanes.
-    pub(crate) quads: Vec<crate::wide::Quad>,
-    /// Per node: its quad's index · 4 + lanes − 1, or [`crate::wide::NO_QUAD`].
-    pub(crate) quad_of: Vec<u32>,
+    /// below each internal node at even depth, in lanes, and per node its quad's index · 4 +
+    /// lanes − 1 (or [`crate::wide::NO_QUAD`]). Built by the first collision query, so the
+    /// build and trees never queried pay nothing.
+    pub(crate) quads: std::sync::OnceLock<crate::wide::Quads>,
     /// Distance volumes (one rectangle swept sphere per node), built on the first distance or
     /// tolerance query (`crate::distance`), so collision-only users pay no memory.
     pub(crate) distance_volumes: std::sync::OnceLock<Vec<crate::distance::rss::DNode>>,
@@ -145,10 +145,8 @@ impl ObbTree {
         let sphere = Sphere::from_points(points);
         let aabb = mesh.aabb();
         let radius_from_origin = aabb.min.abs().max(aabb.max.abs()).length();
-        let (quads, quad_of) = crate::wide::build_quads(&nodes);
         ObbTree {
-            quads,
-            quad_of,
+            quads: std::sync::OnceLock::new(),
             nodes,
             order,
             ends,
@@ -165,6 +163,13 @@ impl ObbTree {
 }
 
 impl ObbTree {
+    /// The quad layer of the wide traversal, built on first use.
+    #[inline]
+    pub(crate) fn quads(&self) -> &crate::wide::Quads {
+        self.quads
+            .get_or_init(|| crate::wide::build_quads(&self.nodes))
+    }
+
     /// The nodes, depth-first (node 0 is the root), as f64 views ([`ObbTree::node`]); builds
     /// the list (the tree stores compact f32 nodes).
     pub fn nodes(&self) -> Vec<Node> {
@@ -270,7 +275,7 @@ impl ObbTree {
     }
 
     /// Heap and inline bytes held by the tree itself (nodes, the quad layer of the wide
-    /// traversal, leaf order and its end bits,
+    /// traversal once a collision query has built it, leaf order and its end bits,
     /// component points), not counting the mesh, which it shares through an `Arc` (count it
     /// once with [`TriMesh::memory_bytes`] however many trees share it; [`ObbTree::build`]
     /// gives the tree its own copy, [`ObbTree::build_shared`] none). Mesh plus tree, divided by
@@ -281,6 +286,8 @@ impl ObbTree {
     /// use frcd_obb::{BuildOptions, ObbTree};
     /// let mesh = Arc::new(frcd_geom::shapes::icosphere(1.0, 3));
     /// let tree = ObbTree::build_shared(mesh.clone(), &BuildOptions::default());
+    /// // A first query builds the wide traversal's quad layer.
+    /// frcd_obb::collide(&tree, &Default::default(), &tree, &Default::default(), &Default::default());
     /// let per_triangle = (mesh.memory_bytes() + tree.memory_bytes()) / mesh.triangle_count();
     /// // 64-byte traversal nodes plus the wide traversal's quad layer (256 bytes per internal
     /// // node at even depth) and the mesh.
@@ -289,8 +296,7 @@ impl ObbTree {
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Self>()
             + self.nodes.capacity() * std::mem::size_of::<TNode>()
-            + self.quads.capacity() * std::mem::size_of::<crate::wide::Quad>()
-            + self.quad_of.capacity() * std::mem::size_of::<u32>()
+            + self.quads.get().map_or(0, |q| q.memory_bytes())
             + self.order.capacity() * std::mem::size_of::<u32>()
             + self.ends.capacity() * std::mem::size_of::<u64>()
             + self.component_points.capacity() * std::mem::size_of::<DVec3>()

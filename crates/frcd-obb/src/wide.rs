@@ -173,7 +173,22 @@ pub(crate) fn quad_ids(nodes: &[TNode], n: u32) -> ([u32; 4], usize) {
 
 /// The quad layer of a tree: one [`Quad`] per internal node at even depth, and per node its
 /// quad's index times four plus the lane count minus one, or [`NO_QUAD`].
-pub(crate) fn build_quads(nodes: &[TNode]) -> (Vec<Quad>, Vec<u32>) {
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Quads {
+    pub quads: Vec<Quad>,
+    pub of: Vec<u32>,
+}
+
+impl Quads {
+    /// Heap bytes.
+    pub fn memory_bytes(&self) -> usize {
+        self.quads.capacity() * std::mem::size_of::<Quad>()
+            + self.of.capacity() * std::mem::size_of::<u32>()
+    }
+}
+
+/// Builds the quad layer of a tree's nodes.
+pub(crate) fn build_quads(nodes: &[TNode]) -> Quads {
     let mut depth = vec![0u32; nodes.len()];
     let mut of = vec![NO_QUAD; nodes.len()];
     let mut quads = Vec::new();
@@ -206,7 +221,7 @@ pub(crate) fn build_quads(nodes: &[TNode]) -> (Vec<Quad>, Vec<u32>) {
     }
     // The pushes may have doubled the capacity: keep only what is used.
     quads.shrink_to_fit();
-    (quads, of)
+    Quads { quads, of }
 }
 
 /// The f32 test of one query (module docs).
@@ -901,7 +916,7 @@ mod tests {
             .unwrap();
             let (mut with, mut depth) = (0, vec![0u32; nodes.len()]);
             for n in 0..nodes.len() {
-                let q = tree.quad_of[n];
+                let q = tree.quads().of[n];
                 if nodes[n].is_leaf() {
                     assert_eq!(q, NO_QUAD);
                     continue;
@@ -913,7 +928,7 @@ mod tests {
                     continue;
                 }
                 with += 1;
-                let quad = &tree.quads[(q >> 2) as usize];
+                let quad = &tree.quads().quads[(q >> 2) as usize];
                 let (ids, len) = quad_ids(nodes, n as u32);
                 assert_eq!((q & 3) as usize + 1, len);
                 assert_eq!(quad.ids[..len], ids[..len]);
