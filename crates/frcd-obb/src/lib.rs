@@ -32,6 +32,7 @@ mod sat;
 mod saved;
 mod solid;
 mod tree;
+mod wide;
 mod world;
 
 pub use checked::{PairSide, QueryError, try_collide, try_collide_cached};

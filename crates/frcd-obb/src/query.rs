@@ -5,6 +5,7 @@
 use crate::sat::{self, Placed, SLACK_REL};
 use crate::solid::point_inside;
 use crate::tree::ObbTree;
+use crate::wide::{self, ALanes, NO_QUAD, Placed32, Sat32, quad_ids};
 use frcd_geom::{Aabb, DMat3, DVec3, Pose, Triangle};
 use frcd_tritri::{Contact, Method};
 
@@ -82,11 +83,13 @@ pub enum Containment {
 pub struct Counters {
     /// Sphere and AABB tests of the hybrid top volume.
     pub top_tests: u64,
-    /// OBB-OBB separating-axis tests.
+    /// OBB-OBB separating-axis tests: box pairs decided. The wide traversal decides up to
+    /// four pairs in one four-lane test; each lane in use counts as one box test (so the count
+    /// compares with the binary traversal's, and time per box test is time per pair decided).
     pub box_tests: u64,
     /// Triangle-triangle tests (after the exact per-pair box check).
     pub tri_tests: u64,
-    /// B boxes mapped into A's frame (a 3x3 product each).
+    /// B boxes mapped into A's frame (a 3x3 product each; one per lane when placed in lanes).
     pub placements: u64,
 }
 
@@ -291,11 +294,13 @@ impl PairCache {
     }
 }
 
-/// The traversal stack: node pairs, each naming its B box (placed in A's frame) in `placed`.
+/// The traversal stack: node pairs, each naming its B box (placed in A's frame) in `placed`
+/// (f64 boxes for the f64 traversal) or `placed32` (the wide f32 traversal).
 #[derive(Default)]
 struct Stack {
     pairs: Vec<(u32, u32, u32)>,
     placed: Vec<Placed>,
+    placed32: Vec<Placed32>,
 }
 
 impl Stack {
@@ -303,8 +308,33 @@ impl Stack {
         Stack {
             pairs: Vec::with_capacity(64),
             placed: Vec::with_capacity(64),
+            placed32: Vec::with_capacity(64),
         }
     }
+}
+
+/// Which traversal a query runs (crate-internal switch, for tests comparing the two).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Traversal {
+    /// The wide f32 traversal when the query's magnitudes fit f32 (`wide.rs`), else the f64 one.
+    Wide,
+    /// The binary f64 traversal (one box pair per test, `sat.rs`).
+    #[cfg_attr(not(test), allow(dead_code))]
+    Binary,
+}
+
+thread_local! {
+    /// The traversal of this thread's queries (tests switch it; queries read it once).
+    static TRAVERSAL: std::cell::Cell<Traversal> = const { std::cell::Cell::new(Traversal::Wide) };
+}
+
+/// Runs `f` with this thread's queries using traversal `t` (tests).
+#[cfg(test)]
+pub(crate) fn with_traversal<R>(t: Traversal, f: impl FnOnce() -> R) -> R {
+    let old = TRAVERSAL.with(|c| c.replace(t));
+    let r = f();
+    TRAVERSAL.with(|c| c.set(old));
+    r
 }
 
 struct Ctx<'a> {
@@ -314,18 +344,30 @@ struct Ctx<'a> {
     slack: f64,
     method: Method,
     counters: Counters,
+    /// The f32 box test of the wide traversal, `None` where the query's magnitudes do not fit
+    /// f32 (then the binary f64 traversal runs).
+    sat32: Option<Sat32>,
 }
 
 impl<'a> Ctx<'a> {
     fn new(a: &'a ObbTree, pose_a: &Pose, b: &'a ObbTree, pose_b: &Pose, method: Method) -> Self {
         let frame = RelativeFrame::new(pose_a, pose_b);
+        let slack = query_slack(a, b, &frame);
+        let sat32 = match TRAVERSAL.with(|c| c.get()) {
+            Traversal::Wide => {
+                let mag = a.radius_from_origin + b.radius_from_origin + frame.t.length();
+                Sat32::new(frame.m, frame.t, slack, mag)
+            }
+            Traversal::Binary => None,
+        };
         Ctx {
             a,
             b,
-            slack: query_slack(a, b, &frame),
+            slack,
             frame,
             method,
             counters: Counters::default(),
+            sat32,
         }
     }
 
@@ -421,6 +463,21 @@ impl<'a> Ctx<'a> {
         i: u32,
         j: u32,
         stack: &mut Stack,
+        front: Option<(&mut Vec<FrontEntry>, f64)>,
+        hit: &mut impl FnMut(u32, u32) -> bool,
+    ) -> bool {
+        match self.sat32 {
+            Some(sat) => self.descend_wide(&sat, i, j, stack, front, hit),
+            None => self.descend64(i, j, stack, front, hit),
+        }
+    }
+
+    /// [`Ctx::descend`] on the binary f64 traversal: one box pair per test (`sat.rs`).
+    fn descend64(
+        &mut self,
+        i: u32,
+        j: u32,
+        stack: &mut Stack,
         mut front: Option<(&mut Vec<FrontEntry>, f64)>,
         hit: &mut impl FnMut(u32, u32) -> bool,
     ) -> bool {
@@ -486,6 +543,179 @@ impl<'a> Ctx<'a> {
             }
         }
         stack.placed.truncate(pbase);
+        false
+    }
+
+    /// [`Ctx::descend`] on the wide f32 traversal (`wide.rs`). Stack entries are node pairs
+    /// whose boxes overlap (tested); expanding one tests the smaller node against the (2 to 4)
+    /// nodes two levels below the bigger one in one four-lane test (a child that is a leaf
+    /// stands for itself; the bigger box is split as in the binary traversal, leaves never),
+    /// so a stack step decides up to four box pairs with one branch. Each lane counts as one
+    /// box test, each B box placed in A's frame as one placement. Front entries are binary
+    /// node pairs, as in the binary traversal, so a front is a cut of either traversal tree.
+    fn descend_wide(
+        &mut self,
+        sat: &Sat32,
+        i: u32,
+        j: u32,
+        stack: &mut Stack,
+        mut front: Option<(&mut Vec<FrontEntry>, f64)>,
+        hit: &mut impl FnMut(u32, u32) -> bool,
+    ) -> bool {
+        let base = stack.pairs.len();
+        let pbase = stack.placed32.len();
+        let (a, b) = (self.a, self.b);
+        let s = sat.s();
+        // The start pair, in one lane; a cache's front walk starts many descents from single
+        // pairs, most of them separated: there the f64 test's early exits are cheaper.
+        self.counters.placements += 1;
+        self.counters.box_tests += 1;
+        let pj = sat.place(&b.nodes[j as usize]);
+        let margin = if front.is_some() {
+            let p64 = Placed::new(&b.nodes[j as usize], &self.frame.m, self.frame.t);
+            sat::separation(&a.nodes[i as usize], &p64, self.slack).map(|x| x.1)
+        } else {
+            let m = wide::separation4(&ALanes::splat(&a.nodes[i as usize]), &pj.splat(), s, 1);
+            (m.0[0] > 0.0).then(|| wide::margin64(m.0[0]))
+        };
+        if let Some(margin) = margin {
+            if let Some((f, clock)) = &mut front {
+                f.push(FrontEntry {
+                    a: i,
+                    b: j,
+                    kind: SEPARATED,
+                    bound: *clock + margin,
+                });
+            }
+            return false;
+        }
+        let (qa_all, qb_all) = (a.quads(), b.quads());
+        // Placed boxes are named by index, as in `descend64`: indices never decrease up the
+        // stack, so when an entry is popped every box above its own is finished with.
+        stack.placed32.push(pj);
+        stack.pairs.push((i, j, pbase as u32));
+        while stack.pairs.len() > base {
+            let (i, j, p) = stack.pairs.pop().expect("non-empty");
+            stack.placed32.truncate(p as usize + 1);
+            let na = &a.nodes[i as usize];
+            let nb = &b.nodes[j as usize];
+            if na.is_leaf() && nb.is_leaf() {
+                if let Some((f, _)) = &mut front {
+                    f.push(FrontEntry {
+                        a: i,
+                        b: j,
+                        kind: OVERLAP,
+                        bound: f64::NEG_INFINITY,
+                    });
+                }
+                if self.leaf_pair(i, j, hit) {
+                    if let Some((f, _)) = &mut front {
+                        f.extend(stack.pairs[base..].iter().map(|&(a, b, _)| FrontEntry {
+                            a,
+                            b,
+                            kind: UNTESTED,
+                            bound: f64::NEG_INFINITY,
+                        }));
+                    }
+                    stack.pairs.truncate(base);
+                    stack.placed32.truncate(pbase);
+                    return true;
+                }
+                continue;
+            }
+            let split_a = if nb.is_leaf() {
+                true
+            } else if na.is_leaf() {
+                false
+            } else {
+                na.size2() >= nb.size2()
+            };
+            if split_a {
+                let qa = qa_all.of[i as usize];
+                let (ids, n, lanes) = if qa != NO_QUAD {
+                    let q = &qa_all.quads[(qa >> 2) as usize];
+                    (q.ids, (qa & 3) as usize + 1, ALanes::from_quad(q))
+                } else {
+                    let (ids, n) = quad_ids(&a.nodes, i);
+                    (ids, n, ALanes::gather(&a.nodes, &ids, n))
+                };
+                self.counters.box_tests += n as u64;
+                let pb = stack.placed32[p as usize].splat();
+                let m = wide::separation4(&lanes, &pb, s, (1 << n) - 1);
+                if front.is_none() {
+                    // Branch-free: every lane written, the overlapping ones kept. Pushed last
+                    // to first: the leftmost lane is expanded first.
+                    let top = stack.pairs.len();
+                    stack.pairs.resize(top + 4, (0, 0, 0));
+                    let mut len = top;
+                    for k in (0..n).rev() {
+                        stack.pairs[len] = (ids[k], j, p);
+                        len += 1 - (m.0[k] > 0.0) as usize;
+                    }
+                    stack.pairs.truncate(len);
+                    continue;
+                }
+                for k in (0..n).rev() {
+                    if m.0[k] > 0.0 {
+                        if let Some((f, clock)) = &mut front {
+                            f.push(FrontEntry {
+                                a: ids[k],
+                                b: j,
+                                kind: SEPARATED,
+                                bound: *clock + wide::margin64(m.0[k]),
+                            });
+                        }
+                    } else {
+                        stack.pairs.push((ids[k], j, p));
+                    }
+                }
+            } else {
+                let qb = qb_all.of[j as usize];
+                let (ids, n, lanes) = if qb != NO_QUAD {
+                    let q = &qb_all.quads[(qb >> 2) as usize];
+                    (q.ids, (qb & 3) as usize + 1, sat.place_quad(q))
+                } else {
+                    let (ids, n) = quad_ids(&b.nodes, j);
+                    (ids, n, sat.place_lanes(&b.nodes, &ids, n))
+                };
+                self.counters.box_tests += n as u64;
+                self.counters.placements += n as u64;
+                let m = wide::separation4(&ALanes::splat(na), &lanes, s, (1 << n) - 1);
+                if front.is_none() {
+                    // Branch-free, as above; placed boxes stay in step with the pairs.
+                    let top = stack.pairs.len();
+                    let q0 = stack.placed32.len();
+                    stack.pairs.resize(top + 4, (0, 0, 0));
+                    stack.placed32.resize(q0 + 4, lanes.lane(0));
+                    let mut len = 0;
+                    for k in (0..n).rev() {
+                        stack.placed32[q0 + len] = lanes.lane(k);
+                        stack.pairs[top + len] = (i, ids[k], (q0 + len) as u32);
+                        len += 1 - (m.0[k] > 0.0) as usize;
+                    }
+                    stack.pairs.truncate(top + len);
+                    stack.placed32.truncate(q0 + len);
+                    continue;
+                }
+                for k in (0..n).rev() {
+                    if m.0[k] > 0.0 {
+                        if let Some((f, clock)) = &mut front {
+                            f.push(FrontEntry {
+                                a: i,
+                                b: ids[k],
+                                kind: SEPARATED,
+                                bound: *clock + wide::margin64(m.0[k]),
+                            });
+                        }
+                    } else {
+                        let q = stack.placed32.len() as u32;
+                        stack.placed32.push(lanes.lane(k));
+                        stack.pairs.push((i, ids[k], q));
+                    }
+                }
+            }
+        }
+        stack.placed32.truncate(pbase);
         false
     }
 
@@ -601,7 +831,10 @@ fn finish(ctx: &Ctx<'_>, request: &Request, mut c: Collision) -> Collision {
 ///
 /// B is tested in A's frame (one relative pose per query, [`RelativeFrame`]); the hybrid top
 /// volume runs first, then a depth-first traversal with the conservative 15-axis test, then the
-/// triangle test of `request.method` on leaf pairs.
+/// triangle test of `request.method` on leaf pairs. The traversal is wide: each step tests one
+/// node against the up to four nodes two levels below the other in one four-lane f32 test whose
+/// error bound keeps every box pair the exact f64 test would keep (the f64 test alone where the
+/// query's magnitudes do not fit f32), so the answer is the same as with one f64 test per pair.
 ///
 /// ```
 /// use frcd_obb::{collide, BuildOptions, Mode, ObbTree, Request};
@@ -828,4 +1061,115 @@ fn walk_front(
         }
     }
     true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tree::BuildOptions;
+    use frcd_geom::{DQuat, shapes};
+
+    /// The wide f32 traversal and the binary f64 one give the oracle's pairs and the same
+    /// first-contact answer, with the cache or without, near contact and at huge offsets
+    /// (where the wide traversal hands over to the f64 one); the counters count lanes.
+    #[test]
+    fn wide_and_binary_traversals_agree_with_the_oracle() {
+        let ma = shapes::icosphere(1.0, 3);
+        let mb = shapes::subdivide(&shapes::cuboid(DVec3::new(0.9, 0.3, 0.6)));
+        for leaf in [1, 2, 4] {
+            let opts = BuildOptions {
+                max_leaf_triangles: leaf,
+                ..BuildOptions::default()
+            };
+            let ta = ObbTree::build(&ma, &opts);
+            let tb = ObbTree::build(&mb, &opts);
+            let all = Request {
+                mode: Mode::AllPairs,
+                ..Request::default()
+            };
+            let first = Request::default();
+            let mut caches = [PairCache::new(), PairCache::new()];
+            let (mut touching, mut wide_boxes, mut binary_boxes) = (0, 0, 0);
+            for k in 0..120 {
+                let offset = if k % 40 == 39 { 1e31 } else { 1.0 };
+                let base = DVec3::new(0.3 * k as f64, -2.0, 7.0) * offset;
+                let pa = Pose::new(base, DQuat::from_rotation_y(0.05 * k as f64));
+                let s = 0.6 + 0.012 * k as f64 % 1.0;
+                let dir = DVec3::new(1.0, 0.2 * (k % 5) as f64, 0.1).normalize();
+                let pb = Pose::new(
+                    base + dir * s * 1.4,
+                    DQuat::from_axis_angle(DVec3::new(0.3, 1.0, -0.2).normalize(), 0.07 * k as f64),
+                );
+                let truth = crate::oracle::pairs(&ma, &pa, &mb, &pb);
+                touching += !truth.is_empty() as u32;
+                for (n, t) in [Traversal::Wide, Traversal::Binary].into_iter().enumerate() {
+                    with_traversal(t, || {
+                        let c = collide(&ta, &pa, &tb, &pb, &all);
+                        assert_eq!(c.pairs, truth, "leaf {leaf} step {k} {t:?}");
+                        let cc = collide_cached(&ta, &pa, &tb, &pb, &all, &mut caches[n]);
+                        assert_eq!(cc.pairs, truth, "leaf {leaf} step {k} {t:?} cached");
+                        let f = collide(&ta, &pa, &tb, &pb, &first);
+                        assert_eq!(f.collide, !truth.is_empty(), "leaf {leaf} step {k} {t:?}");
+                        if let Some(w) = f.witness {
+                            assert!(truth.binary_search(&w).is_ok());
+                        }
+                        if offset == 1.0 {
+                            match t {
+                                Traversal::Wide => wide_boxes += c.counters.box_tests,
+                                Traversal::Binary => binary_boxes += c.counters.box_tests,
+                            }
+                        }
+                    });
+                }
+            }
+            assert!(touching > 20 && touching < 110, "{touching}");
+            // Both traversals test box pairs (a lane counts one), within a factor of two.
+            assert!(wide_boxes > 0 && binary_boxes > 0);
+            assert!(wide_boxes < 2 * binary_boxes && binary_boxes < 2 * wide_boxes);
+        }
+    }
+}
+
+#[cfg(test)]
+mod huge_tests {
+    use super::*;
+    use crate::tree::BuildOptions;
+    use frcd_geom::{DQuat, shapes};
+
+    /// Meshes beyond f32's range: the query runs the f64 traversal and still equals the oracle.
+    #[test]
+    fn magnitudes_beyond_f32_use_the_f64_traversal() {
+        let ma = shapes::icosphere(1e31, 2);
+        let mb = shapes::cuboid(DVec3::new(9e30, 3e30, 6e30));
+        let opts = BuildOptions::default();
+        let (ta, tb) = (ObbTree::build(&ma, &opts), ObbTree::build(&mb, &opts));
+        let all = Request {
+            mode: Mode::AllPairs,
+            ..Request::default()
+        };
+        let mut hits = 0;
+        for k in 0..20 {
+            let pa = Pose::IDENTITY;
+            let pb = Pose::new(
+                DVec3::new(1.2e31 + 0.1e31 * k as f64, 0.0, 0.0),
+                DQuat::from_rotation_z(0.3 * k as f64),
+            );
+            let ctx = Ctx::new(&ta, &pa, &tb, &pb, Method::Exact);
+            assert!(ctx.sat32.is_none());
+            let truth = crate::oracle::pairs(&ma, &pa, &mb, &pb);
+            hits += !truth.is_empty() as u32;
+            assert_eq!(collide(&ta, &pa, &tb, &pb, &all).pairs, truth, "{k}");
+        }
+        assert!(hits > 0 && hits < 20, "{hits}");
+        // The same shapes at unit scale run the wide traversal.
+        let small = ObbTree::build(&shapes::icosphere(1.0, 2), &opts);
+        let ctx = Ctx::new(
+            &small,
+            &Pose::IDENTITY,
+            &small,
+            &Pose::IDENTITY,
+            Method::Exact,
+        );
+        assert!(ctx.sat32.is_some());
+    }
 }

@@ -91,6 +91,11 @@ pub struct ObbTree {
     pub(crate) uid: u64,
     /// Every edge has an even number of incident triangles (parity tests are meaningful).
     pub(crate) closed: bool,
+    /// The derived four-lane layer of the wide traversal (`wide.rs`): the nodes two levels
+    /// below each internal node at even depth, in lanes, and per node its quad's index · 4 +
+    /// lanes − 1 (or [`crate::wide::NO_QUAD`]). Built by the first collision query, so the
+    /// build and trees never queried pay nothing.
+    pub(crate) quads: std::sync::OnceLock<crate::wide::Quads>,
     /// Distance volumes (one rectangle swept sphere per node), built on the first distance or
     /// tolerance query (`crate::distance`), so collision-only users pay no memory.
     pub(crate) distance_volumes: std::sync::OnceLock<Vec<crate::distance::rss::DNode>>,
@@ -141,6 +146,7 @@ impl ObbTree {
         let aabb = mesh.aabb();
         let radius_from_origin = aabb.min.abs().max(aabb.max.abs()).length();
         ObbTree {
+            quads: std::sync::OnceLock::new(),
             nodes,
             order,
             ends,
@@ -157,6 +163,13 @@ impl ObbTree {
 }
 
 impl ObbTree {
+    /// The quad layer of the wide traversal, built on first use.
+    #[inline]
+    pub(crate) fn quads(&self) -> &crate::wide::Quads {
+        self.quads
+            .get_or_init(|| crate::wide::build_quads(&self.nodes))
+    }
+
     /// The nodes, depth-first (node 0 is the root), as f64 views ([`ObbTree::node`]); builds
     /// the list (the tree stores compact f32 nodes).
     pub fn nodes(&self) -> Vec<Node> {
@@ -261,7 +274,8 @@ impl ObbTree {
         self.mesh.triangle(tri as usize)
     }
 
-    /// Heap and inline bytes held by the tree itself (nodes, leaf order and its end bits,
+    /// Heap and inline bytes held by the tree itself (nodes, the quad layer of the wide
+    /// traversal once a collision query has built it, leaf order and its end bits,
     /// component points), not counting the mesh, which it shares through an `Arc` (count it
     /// once with [`TriMesh::memory_bytes`] however many trees share it; [`ObbTree::build`]
     /// gives the tree its own copy, [`ObbTree::build_shared`] none). Mesh plus tree, divided by
@@ -272,12 +286,17 @@ impl ObbTree {
     /// use frcd_obb::{BuildOptions, ObbTree};
     /// let mesh = Arc::new(frcd_geom::shapes::icosphere(1.0, 3));
     /// let tree = ObbTree::build_shared(mesh.clone(), &BuildOptions::default());
+    /// // A first query builds the wide traversal's quad layer.
+    /// frcd_obb::collide(&tree, &Default::default(), &tree, &Default::default(), &Default::default());
     /// let per_triangle = (mesh.memory_bytes() + tree.memory_bytes()) / mesh.triangle_count();
-    /// assert!(per_triangle > 64 && per_triangle < 200, "{per_triangle}");
+    /// // 64-byte traversal nodes plus the wide traversal's quad layer (256 bytes per internal
+    /// // node at even depth) and the mesh.
+    /// assert!(per_triangle > 64 && per_triangle < 300, "{per_triangle}");
     /// ```
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Self>()
             + self.nodes.capacity() * std::mem::size_of::<TNode>()
+            + self.quads.get().map_or(0, |q| q.memory_bytes())
             + self.order.capacity() * std::mem::size_of::<u32>()
             + self.ends.capacity() * std::mem::size_of::<u64>()
             + self.component_points.capacity() * std::mem::size_of::<DVec3>()

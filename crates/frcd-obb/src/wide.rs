@@ -1,0 +1,998 @@
+//! The wide box test of the traversal: one 15-axis separating-axis test run on four box pairs
+//! at once, in four f32 lanes (a plain `[f32; 4]` type the compiler vectorises: SSE on the
+//! x86-64 baseline, NEON on aarch64; no unsafe code, no runtime detection, no fused
+//! multiply-add, so every operation is one IEEE rounding).
+//!
+//! The traversal (`query.rs`) tests one node of one tree against the (up to four) nodes two
+//! levels below a node of the other tree: A's grandchildren against one placed box of B, or
+//! B's grandchildren, placed in A's frame in lanes, against one box of A. Each lane computes
+//! exactly the scalar operations below, in the same order; a lane's answer does not depend on
+//! the other lanes.
+//!
+//! # The f32 test and its error bound
+//!
+//! B's box is placed with the query's rotation rounded to f32 (`M32`), `R`, `t` and the radii
+//! are formed in f32, and the centre offset `d = (M c_B + t) − c_A` is formed in f64 and rounded
+//! once, so that every error scales with the pair's own sizes, not with the coordinates. With
+//! `ε = 2⁻²⁴`, `D = ‖d‖₁`, `ΣH = ΣH_A + ΣH_B` (`u_i` the f32 axes of A, `v_j` those of B, both
+//! orthonormal up to `η < 2⁻²²` (`nodes.rs`), so `|u_i|, |v_j| ≤ 1 + η`; one rounding per
+//! operation):
+//!
+//! - `M32`: `|M32_kl − M_kl| ≤ ε |M_kl|`;
+//! - placed axes `P_j[k] = (M32_k0 v_j0 + M32_k1 v_j1) + M32_k2 v_j2`:
+//!   `|P32 − P| ≤ (ε + γ₃(1 + ε)) Σ_l |M_kl| |v_jl| ≤ 4.02 ε` per entry (`γₙ = nε/(1 − nε)`);
+//! - `R_ij = (u_i0 P_j0 + u_i1 P_j1) + u_i2 P_j2`: `|R32 − R| ≤ 4.02 ε ‖u_i‖₁ +
+//!   γ₃ ‖u_i‖ ‖P_j‖ ≤ 10.2 ε`, so `|R32| + `[`EPS_R32`]` ≥ |R| + `[`EPS_R`] and every radius the
+//!   f32 test computes is at least `(1 − γ₆)` times the f64 test's radius (which is at most
+//!   `1.03 ΣH`);
+//! - `d`: `|d32_k − d_k| ≤ 1.01 ε |d_k|` (plus f64 rounding of order `2⁻⁵⁰ M`, `M` the query's
+//!   magnitude); `t_i = u_i · d`: error `≤ 4.3 ε D`; B's face projections `P_j · d`:
+//!   `≤ 8.3 ε D`; the cross projections `t_{i2} R_{i1 j} − t_{i1} R_{i2 j}`:
+//!   `≤ 2·4.3·1.02 ε D + 2·1.01·10.2 ε D + 4.2 ε D ≤ 34 ε D`;
+//! - the slack sum `S = ((s + C_H ΣH_A) + C_H ΣH_B) + C_D D` and each radius sum round by
+//!   `γ₅` relative, far inside the factor 1.25 below.
+//!
+//! The test asks for a separation larger than `S` with `s = 2·slack` (the f64 query slack
+//! rounded up to f32, at least `2⁻¹⁰⁰`), [`C_H`]` = 2⁻¹⁶ ≥ 1.25·SIGMA + 7 ε` and
+//! [`C_D`]` = 2⁻¹⁸ = 64 ε`: when it finds one, the exact real margin of that axis exceeds
+//! `1.25 ×` the f64 test's slack plus its sigma terms, so the f64 test of `sat.rs` (whose own
+//! rounding is far below a quarter of its slack) separates the pair too, on the same axis. The
+//! f32 test therefore never culls a pair the f64 test keeps (tested below on random, touching,
+//! near-parallel, tiny and huge boxes, and at the f32 test's own threshold), and its margin on
+//! an axis never exceeds the f64 margin on that axis, so it bounds the gap as the f64 one does
+//! (scaled by [`MARGIN_SCALE`]).
+//!
+//! It runs only when the query's magnitude lies in `[2⁻⁶⁰, 2¹⁰⁰]` ([`Sat32::new`]): no f32
+//! overflow, and underflow stays below the floor of `s`; outside that range queries use the f64
+//! test. A NaN margin never separates (comparisons with NaN are false).
+
+// Index loops mirror the formulas (axis i, coordinate x, lane k) and keep the operation order
+// the error bound counts.
+#![allow(clippy::needless_range_loop)]
+
+use crate::nodes::{MARGIN_SCALE, TNode};
+use frcd_geom::{DMat3, DVec3};
+
+/// Added to every `|R_ij|` by the f32 test (covers its rounding of `R` and the f64 test's
+/// [`crate::sat::EPS_R`]).
+pub(crate) const EPS_R32: f32 = 1.0 / (1u32 << 20) as f32;
+/// Slack per unit of `ΣH_A + ΣH_B` in the f32 test.
+pub(crate) const C_H: f32 = 1.0 / (1u32 << 16) as f32;
+/// Slack per unit of `‖d‖₁` in the f32 test.
+pub(crate) const C_D: f32 = 1.0 / (1u32 << 18) as f32;
+
+/// Four f32 lanes.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C, align(16))]
+pub(crate) struct F4(pub [f32; 4]);
+
+impl F4 {
+    #[inline(always)]
+    fn map2(self, o: F4, f: impl Fn(f32, f32) -> f32) -> F4 {
+        F4([
+            f(self.0[0], o.0[0]),
+            f(self.0[1], o.0[1]),
+            f(self.0[2], o.0[2]),
+            f(self.0[3], o.0[3]),
+        ])
+    }
+    #[inline(always)]
+    pub fn splat(x: f32) -> F4 {
+        F4([x; 4])
+    }
+    #[inline(always)]
+    fn add(self, o: F4) -> F4 {
+        self.map2(o, |a, b| a + b)
+    }
+    #[inline(always)]
+    fn sub(self, o: F4) -> F4 {
+        self.map2(o, |a, b| a - b)
+    }
+    #[inline(always)]
+    fn mul(self, o: F4) -> F4 {
+        self.map2(o, |a, b| a * b)
+    }
+    #[inline(always)]
+    fn abs(self) -> F4 {
+        F4([
+            self.0[0].abs(),
+            self.0[1].abs(),
+            self.0[2].abs(),
+            self.0[3].abs(),
+        ])
+    }
+    /// Lane-wise maximum that ignores a NaN in `o` (keeps `self`).
+    #[inline(always)]
+    fn max(self, o: F4) -> F4 {
+        self.map2(o, |a, b| if b > a { b } else { a })
+    }
+    /// Bit `k` set where lane `k` is `> 0`.
+    #[inline(always)]
+    pub fn positive(self) -> u32 {
+        (0..4).fold(0, |m, k| m | ((self.0[k] > 0.0) as u32) << k)
+    }
+}
+
+/// Four f64 lanes (the centres).
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(32))]
+pub(crate) struct D4(pub [f64; 4]);
+
+impl D4 {
+    /// `self − o`, rounded to f32.
+    #[inline(always)]
+    fn sub32(self, o: D4) -> F4 {
+        F4([
+            (self.0[0] - o.0[0]) as f32,
+            (self.0[1] - o.0[1]) as f32,
+            (self.0[2] - o.0[2]) as f32,
+            (self.0[3] - o.0[3]) as f32,
+        ])
+    }
+}
+
+/// The (2 to 4) nodes two levels below an internal node, stored in lanes (structure of
+/// arrays) so that a traversal step loads them without gathering four scattered nodes: the
+/// derived layer of [`crate::ObbTree`], kept for the internal nodes at even depth (the ones a
+/// traversal from the roots expands; others are gathered). Unused lanes repeat lane 0.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C, align(64))]
+pub(crate) struct Quad {
+    /// `u[i][x]`: coordinate `x` of axis `i`.
+    pub u: [[F4; 3]; 3],
+    pub h: [F4; 3],
+    pub c: [F4; 3],
+    /// The binary node ids of the lanes.
+    pub ids: [u32; 4],
+}
+
+const _: () = assert!(std::mem::size_of::<Quad>() == 256);
+
+/// No quad for this node (leaves, odd depth).
+pub(crate) const NO_QUAD: u32 = u32::MAX;
+
+/// The nodes two levels below internal node `n` (a child that is a leaf stands for itself):
+/// 2 to 4 ids, left to right, and their number.
+#[inline(always)]
+pub(crate) fn quad_ids(nodes: &[TNode], n: u32) -> ([u32; 4], usize) {
+    let mut ids = [0u32; 4];
+    let mut len = 0;
+    for c in [n + 1, nodes[n as usize].right()] {
+        let cn = &nodes[c as usize];
+        if cn.is_leaf() {
+            ids[len] = c;
+            len += 1;
+        } else {
+            ids[len] = c + 1;
+            ids[len + 1] = cn.right();
+            len += 2;
+        }
+    }
+    (ids, len)
+}
+
+/// The quad layer of a tree: one [`Quad`] per internal node at even depth, and per node its
+/// quad's index times four plus the lane count minus one, or [`NO_QUAD`].
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Quads {
+    pub quads: Vec<Quad>,
+    pub of: Vec<u32>,
+}
+
+impl Quads {
+    /// Heap bytes.
+    pub fn memory_bytes(&self) -> usize {
+        self.quads.capacity() * std::mem::size_of::<Quad>()
+            + self.of.capacity() * std::mem::size_of::<u32>()
+    }
+}
+
+/// Builds the quad layer of a tree's nodes.
+pub(crate) fn build_quads(nodes: &[TNode]) -> Quads {
+    let mut depth = vec![0u32; nodes.len()];
+    let mut of = vec![NO_QUAD; nodes.len()];
+    let mut quads = Vec::new();
+    for (n, node) in nodes.iter().enumerate() {
+        if node.is_leaf() {
+            continue;
+        }
+        // Children follow their parent in depth-first order: one forward pass sets depths.
+        depth[n + 1] = depth[n] + 1;
+        depth[node.right() as usize] = depth[n] + 1;
+        if depth[n] & 1 != 0 {
+            continue;
+        }
+        let (ids, len) = quad_ids(nodes, n as u32);
+        let mut q = Quad::default();
+        for k in 0..4 {
+            let id = ids[if k < len { k } else { 0 }];
+            let src = &nodes[id as usize];
+            for i in 0..3 {
+                for x in 0..3 {
+                    q.u[i][x].0[k] = src.u[i][x];
+                }
+                q.h[i].0[k] = src.h[i];
+                q.c[i].0[k] = src.c[i];
+            }
+            q.ids[k] = id;
+        }
+        of[n] = (quads.len() as u32) << 2 | (len as u32 - 1);
+        quads.push(q);
+    }
+    // The pushes may have doubled the capacity: keep only what is used.
+    quads.shrink_to_fit();
+    Quads { quads, of }
+}
+
+/// The f32 test of one query (module docs).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Sat32 {
+    /// `M` rounded to f32: `ms[k][l] = M_kl`.
+    ms: [[f32; 3]; 3],
+    m: DMat3,
+    t: DVec3,
+    /// `2 · slack`, rounded up, at least `2⁻¹⁰⁰`.
+    s: f32,
+}
+
+impl Sat32 {
+    /// The f32 test of a query with rotation `m`, translation `t`, f64 slack `slack` and
+    /// magnitude `mag` (`|A's mesh| + |B's mesh| + |t|`), or `None` when `mag` lies outside
+    /// `[2⁻⁶⁰, 2¹⁰⁰]` or anything is not finite.
+    pub fn new(m: DMat3, t: DVec3, slack: f64, mag: f64) -> Option<Self> {
+        let range = 2f64.powi(-60)..=2f64.powi(100);
+        if !range.contains(&mag) || !slack.is_finite() || !m.is_finite() || !t.is_finite() {
+            return None;
+        }
+        let s2 = (2.0 * slack).max(2f64.powi(-100));
+        let mut s = s2 as f32;
+        if (s as f64) < s2 {
+            s = s.next_up();
+        }
+        let e = |k: usize, l: usize| m.col(l)[k] as f32;
+        Some(Sat32 {
+            ms: [0, 1, 2].map(|k| [e(k, 0), e(k, 1), e(k, 2)]),
+            m,
+            t,
+            s,
+        })
+    }
+
+    /// Places one node of B in A's frame.
+    #[inline(always)]
+    pub fn place(&self, node: &TNode) -> Placed32 {
+        let v = &node.u;
+        let ms = &self.ms;
+        // p[j][k] = (M_k0 v_j0 + M_k1 v_j1) + M_k2 v_j2, as the lanes compute it. (Loops, not
+        // `array::map`, which the compiler leaves out of line here.)
+        let mut p = [[0.0f32; 3]; 3];
+        for j in 0..3 {
+            for k in 0..3 {
+                p[j][k] = ms[k][0] * v[j][0] + ms[k][1] * v[j][1] + ms[k][2] * v[j][2];
+            }
+        }
+        Placed32 {
+            p,
+            h: node.h,
+            c: self.m * node.center() + self.t,
+        }
+    }
+
+    /// B's nodes `ids` (1 to 4) placed in A's frame, one per lane (unused lanes repeat lane 0).
+    #[inline(always)]
+    pub fn place_lanes(&self, nodes: &[TNode], ids: &[u32; 4], n: usize) -> BLanes {
+        let mut out = BLanes::default();
+        // Gather: v[j][l] lane k = axis j, coordinate l of node k.
+        let mut v = [[F4::default(); 3]; 3];
+        for k in 0..4 {
+            let node = &nodes[ids[if k < n { k } else { 0 }] as usize];
+            for j in 0..3 {
+                for l in 0..3 {
+                    v[j][l].0[k] = node.u[j][l];
+                }
+                out.h[j].0[k] = node.h[j];
+            }
+            let c = self.m * node.center() + self.t;
+            for x in 0..3 {
+                out.c[x].0[k] = c[x];
+            }
+        }
+        let ms = &self.ms;
+        for j in 0..3 {
+            for kk in 0..3 {
+                out.p[j][kk] = F4::splat(ms[kk][0])
+                    .mul(v[j][0])
+                    .add(F4::splat(ms[kk][1]).mul(v[j][1]))
+                    .add(F4::splat(ms[kk][2]).mul(v[j][2]));
+            }
+        }
+        out
+    }
+
+    /// The nodes of a quad of B placed in A's frame, one per lane (the same operations as
+    /// [`Sat32::place_lanes`]).
+    #[inline(always)]
+    pub fn place_quad(&self, q: &Quad) -> BLanes {
+        let mut out = BLanes::default();
+        let ms = &self.ms;
+        for j in 0..3 {
+            for kk in 0..3 {
+                out.p[j][kk] = F4::splat(ms[kk][0])
+                    .mul(q.u[j][0])
+                    .add(F4::splat(ms[kk][1]).mul(q.u[j][1]))
+                    .add(F4::splat(ms[kk][2]).mul(q.u[j][2]));
+            }
+        }
+        out.h = q.h;
+        // Centres in f64: M c + t, row by row as glam's `DMat3 * DVec3` (the same f64 value as
+        // `place`, whose rounding the query slack covers either way).
+        let m = &self.m;
+        let mut c = [[0.0f64; 4]; 3];
+        for x in 0..3 {
+            for k in 0..4 {
+                c[x][k] = q.c[x].0[k] as f64;
+            }
+        }
+        for r in 0..3 {
+            let (m0, m1, m2) = (m.x_axis[r], m.y_axis[r], m.z_axis[r]);
+            let mut v = [0.0f64; 4];
+            for k in 0..4 {
+                v[k] = m0 * c[0][k] + m1 * c[1][k] + m2 * c[2][k] + self.t[r];
+            }
+            out.c[r] = D4(v);
+        }
+        out
+    }
+
+    /// The base slack `s` (`2 · slack` rounded up).
+    #[inline(always)]
+    pub fn s(&self) -> f32 {
+        self.s
+    }
+}
+
+/// A box of B placed in A's frame for the f32 test.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Placed32 {
+    /// `p[j]` = B's axis `j` in A's frame.
+    pub p: [[f32; 3]; 3],
+    /// Half extents.
+    pub h: [f32; 3],
+    /// Centre in A's frame, in f64.
+    pub c: DVec3,
+}
+
+impl Placed32 {
+    /// This box in every lane.
+    #[inline(always)]
+    pub fn splat(&self) -> BLanes {
+        let mut out = BLanes::default();
+        for j in 0..3 {
+            for k in 0..3 {
+                out.p[j][k] = F4::splat(self.p[j][k]);
+            }
+            out.h[j] = F4::splat(self.h[j]);
+        }
+        out.c = [D4([self.c.x; 4]), D4([self.c.y; 4]), D4([self.c.z; 4])];
+        out
+    }
+}
+
+/// Up to four boxes of B placed in A's frame, one per lane.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct BLanes {
+    /// `p[j][k]`: coordinate `k` of B's axis `j` in A's frame.
+    pub p: [[F4; 3]; 3],
+    pub h: [F4; 3],
+    pub c: [D4; 3],
+}
+
+impl BLanes {
+    /// Lane `k` as one placed box.
+    #[inline(always)]
+    pub fn lane(&self, k: usize) -> Placed32 {
+        let mut p = [[0.0f32; 3]; 3];
+        for j in 0..3 {
+            for x in 0..3 {
+                p[j][x] = self.p[j][x].0[k];
+            }
+        }
+        Placed32 {
+            p,
+            h: [self.h[0].0[k], self.h[1].0[k], self.h[2].0[k]],
+            c: DVec3::new(self.c[0].0[k], self.c[1].0[k], self.c[2].0[k]),
+        }
+    }
+}
+
+/// Up to four boxes of A, one per lane.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct ALanes {
+    /// `u[i][x]`: coordinate `x` of A's axis `i`.
+    pub u: [[F4; 3]; 3],
+    pub h: [F4; 3],
+    pub c: [D4; 3],
+}
+
+impl ALanes {
+    /// A's nodes `ids` (1 to 4), one per lane (unused lanes repeat lane 0).
+    #[inline(always)]
+    pub fn gather(nodes: &[TNode], ids: &[u32; 4], n: usize) -> ALanes {
+        let mut out = ALanes::default();
+        for k in 0..4 {
+            let node = &nodes[ids[if k < n { k } else { 0 }] as usize];
+            for i in 0..3 {
+                for x in 0..3 {
+                    out.u[i][x].0[k] = node.u[i][x];
+                }
+                out.h[i].0[k] = node.h[i];
+                out.c[i].0[k] = node.c[i] as f64;
+            }
+        }
+        out
+    }
+
+    /// The nodes of a quad, one per lane.
+    #[inline(always)]
+    pub fn from_quad(q: &Quad) -> ALanes {
+        let mut out = ALanes {
+            u: q.u,
+            h: q.h,
+            ..ALanes::default()
+        };
+        for x in 0..3 {
+            let c = &q.c[x].0;
+            out.c[x] = D4([c[0] as f64, c[1] as f64, c[2] as f64, c[3] as f64]);
+        }
+        out
+    }
+
+    /// One node in every lane.
+    #[inline(always)]
+    pub fn splat(node: &TNode) -> ALanes {
+        let mut out = ALanes::default();
+        for i in 0..3 {
+            for x in 0..3 {
+                out.u[i][x] = F4::splat(node.u[i][x]);
+            }
+            out.h[i] = F4::splat(node.h[i]);
+            out.c[i] = D4([node.c[i] as f64; 4]);
+        }
+        out
+    }
+}
+
+/// The f32 15-axis test on four box pairs: lane `k` holds the largest margin (a lower bound on
+/// the boxes' gap along a direction of length at most one, before [`MARGIN_SCALE`]) over the
+/// axes tested, positive exactly when some axis separates the pair by more than the error
+/// bound (module docs). With `all_axes` false, the nine edge-pair axes are skipped when the six
+/// face axes already separate every lane of `active` (a bit mask).
+#[inline(always)]
+pub(crate) fn separation4(a: &ALanes, b: &BLanes, s: f32, active: u32) -> F4 {
+    let d = [
+        b.c[0].sub32(a.c[0]),
+        b.c[1].sub32(a.c[1]),
+        b.c[2].sub32(a.c[2]),
+    ];
+    let ch = F4::splat(C_H);
+    let sa = a.h[0].add(a.h[1]).add(a.h[2]);
+    let sb = b.h[0].add(b.h[1]).add(b.h[2]);
+    let sd = d[0].abs().add(d[1].abs()).add(d[2].abs());
+    let sv = F4::splat(s)
+        .add(ch.mul(sa))
+        .add(ch.mul(sb))
+        .add(F4::splat(C_D).mul(sd));
+    let (u, p) = (&a.u, &b.p);
+    // t_i = u_i · d; R_ij = u_i · P_j. (Loops, not `array::map`, which the compiler leaves
+    // out of line here.)
+    let e = F4::splat(EPS_R32);
+    let mut t = [F4::default(); 3];
+    let mut r = [[F4::default(); 3]; 3];
+    let mut ar = [[F4::default(); 3]; 3];
+    for i in 0..3 {
+        t[i] = u[i][0]
+            .mul(d[0])
+            .add(u[i][1].mul(d[1]))
+            .add(u[i][2].mul(d[2]));
+        for j in 0..3 {
+            r[i][j] = u[i][0]
+                .mul(p[j][0])
+                .add(u[i][1].mul(p[j][1]))
+                .add(u[i][2].mul(p[j][2]));
+            ar[i][j] = r[i][j].abs().add(e);
+        }
+    }
+    let (ha, hb) = (&a.h, &b.h);
+    let mut best = F4::splat(f32::NEG_INFINITY);
+    // A's faces.
+    for i in 0..3 {
+        let rad = ha[i]
+            .add(hb[0].mul(ar[i][0]))
+            .add(hb[1].mul(ar[i][1]))
+            .add(hb[2].mul(ar[i][2]))
+            .add(sv);
+        best = best.max(t[i].abs().sub(rad));
+    }
+    if best.positive() & active == active {
+        return best;
+    }
+    // B's faces: P_j · d.
+    for j in 0..3 {
+        let proj = p[j][0]
+            .mul(d[0])
+            .add(p[j][1].mul(d[1]))
+            .add(p[j][2].mul(d[2]));
+        let rad = hb[j]
+            .add(ha[0].mul(ar[0][j]))
+            .add(ha[1].mul(ar[1][j]))
+            .add(ha[2].mul(ar[2][j]))
+            .add(sv);
+        best = best.max(proj.abs().sub(rad));
+    }
+    if best.positive() & active == active {
+        return best;
+    }
+    // Edge pairs u_i × P_j; (i1, i2) = (i + 1, i + 2) mod 3, likewise (j1, j2).
+    for i in 0..3 {
+        let (i1, i2) = ((i + 1) % 3, (i + 2) % 3);
+        for j in 0..3 {
+            let (j1, j2) = ((j + 1) % 3, (j + 2) % 3);
+            let proj = t[i2].mul(r[i1][j]).sub(t[i1].mul(r[i2][j]));
+            let rad = ha[i1]
+                .mul(ar[i2][j])
+                .add(ha[i2].mul(ar[i1][j]))
+                .add(hb[j1].mul(ar[i][j2]))
+                .add(hb[j2].mul(ar[i][j1]))
+                .add(sv);
+            best = best.max(proj.abs().sub(rad));
+        }
+    }
+    best
+}
+
+/// A lane's margin as the f64 bound the coherence cache stores (`nodes.rs`).
+#[inline(always)]
+pub(crate) fn margin64(m: f32) -> f64 {
+    m as f64 * MARGIN_SCALE
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nodes::compact_box;
+    use crate::sat::{Placed, SLACK_REL, separation};
+    use frcd_geom::{DQuat, Obb};
+
+    fn node(obb: &Obb) -> TNode {
+        let (c, h, u) = compact_box(obb);
+        TNode { c, h, u, link: 0 }
+    }
+
+    fn unit_box(center: DVec3) -> TNode {
+        node(&Obb {
+            center,
+            axes: DMat3::IDENTITY,
+            half_extents: DVec3::ONE,
+        })
+    }
+
+    /// All 15 margins of the f64 test (no early exit), before [`MARGIN_SCALE`].
+    fn margins64(a: &TNode, b: &Placed, slack: f64) -> [f64; 15] {
+        use crate::nodes::SIGMA;
+        use crate::sat::EPS_R;
+        let ax = a.axes();
+        let ax = [ax.x_axis, ax.y_axis, ax.z_axis];
+        let bx = [b.axes.x_axis, b.axes.y_axis, b.axes.z_axis];
+        let d = b.center - a.center();
+        let ah = a.half().to_array();
+        let slack = slack + b.sigma + SIGMA * (ah[0] + ah[1] + ah[2]);
+        let bh = b.half.to_array();
+        let mut r = [[0.0; 3]; 3];
+        let mut ar = [[0.0; 3]; 3];
+        let mut t = [0.0; 3];
+        let mut out = [0.0; 15];
+        for i in 0..3 {
+            t[i] = ax[i].x * d.x + ax[i].y * d.y + ax[i].z * d.z;
+            for j in 0..3 {
+                r[i][j] = ax[i].x * bx[j].x + ax[i].y * bx[j].y + ax[i].z * bx[j].z;
+                ar[i][j] = r[i][j].abs() + EPS_R;
+            }
+            out[i] = t[i].abs()
+                - (ah[i] + bh[0] * ar[i][0] + bh[1] * ar[i][1] + bh[2] * ar[i][2] + slack);
+        }
+        for j in 0..3 {
+            out[3 + j] = (t[0] * r[0][j] + t[1] * r[1][j] + t[2] * r[2][j]).abs()
+                - (ah[0] * ar[0][j] + ah[1] * ar[1][j] + ah[2] * ar[2][j] + bh[j] + slack);
+        }
+        for i in 0..3 {
+            let (i1, i2) = ((i + 1) % 3, (i + 2) % 3);
+            for j in 0..3 {
+                let (j1, j2) = ((j + 1) % 3, (j + 2) % 3);
+                out[6 + 3 * i + j] = (t[i2] * r[i1][j] - t[i1] * r[i2][j]).abs()
+                    - (ah[i1] * ar[i2][j]
+                        + ah[i2] * ar[i1][j]
+                        + bh[j1] * ar[i][j2]
+                        + bh[j2] * ar[i][j1]
+                        + slack);
+            }
+        }
+        out
+    }
+
+    /// splitmix64
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> u64 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^ (z >> 31)
+        }
+        fn f(&mut self) -> f64 {
+            (self.next() >> 11) as f64 / (1u64 << 53) as f64
+        }
+        fn sym(&mut self) -> f64 {
+            2.0 * self.f() - 1.0
+        }
+        fn v(&mut self) -> DVec3 {
+            DVec3::new(self.sym(), self.sym(), self.sym())
+        }
+        fn rot(&mut self) -> DQuat {
+            let q = DQuat::from_xyzw(self.sym(), self.sym(), self.sym(), self.sym());
+            if q.length() < 1e-3 {
+                DQuat::IDENTITY
+            } else {
+                q.normalize()
+            }
+        }
+    }
+
+    /// One box pair and pose: A's node, B's node (local), the frame.
+    #[derive(Clone, Copy)]
+    struct Case {
+        a: TNode,
+        b: TNode,
+        m: DMat3,
+        t: DVec3,
+    }
+
+    impl Case {
+        fn mag(&self) -> f64 {
+            let r = |n: &TNode| n.center().length() + n.half().length();
+            r(&self.a) + r(&self.b) + self.t.length()
+        }
+        fn slack(&self) -> f64 {
+            SLACK_REL * self.mag() + frcd_geom::ABSOLUTE_SLACK
+        }
+    }
+
+    /// Runs four cases through the lanes in both arrangements (A in lanes against a splatted
+    /// B, B placed in lanes against a splatted A) where the cases share a frame, and each case
+    /// alone in lane 0; checks each lane against the f64 test: the f32 test never separates
+    /// what f64 keeps, and its margin never exceeds the f64 margin of the best f32 axis.
+    /// Returns (f64 separates, f32 separates) per case.
+    fn check4(cases: &[Case; 4], what: &str) -> [(bool, bool); 4] {
+        let mut out = [(false, false); 4];
+        for (k, c) in cases.iter().enumerate() {
+            let slack = c.slack();
+            let p64 = Placed::new(&c.b, &c.m, c.t);
+            let s64 = separation(&c.a, &p64, slack);
+            let all64 = margins64(&c.a, &p64, slack);
+            let max64 = all64.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let Some(sat) = Sat32::new(c.m, c.t, slack, c.mag()) else {
+                out[k] = (s64.is_some(), false);
+                continue;
+            };
+            // Lane 0 alone, and the case in every lane position with the others as fillers.
+            let mut seen = Vec::new();
+            let nodes_a: Vec<TNode> = cases.iter().map(|x| x.a).collect();
+            let nodes_b: Vec<TNode> = cases.iter().map(|x| x.b).collect();
+            let ids = [
+                k as u32,
+                ((k + 1) % 4) as u32,
+                ((k + 2) % 4) as u32,
+                ((k + 3) % 4) as u32,
+            ];
+            // A in lanes (lane 0 is this case) against this case's B.
+            let al = ALanes::gather(&nodes_a, &ids, 4);
+            let m1 = separation4(&al, &sat.place(&c.b).splat(), sat.s(), 1);
+            seen.push(m1.0[0]);
+            // B placed in lanes against this case's A (same frame for every lane).
+            let bl = sat.place_lanes(&nodes_b, &ids, 4);
+            let m2 = separation4(&ALanes::splat(&c.a), &bl, sat.s(), 0xF);
+            seen.push(m2.0[0]);
+            // A single lane (fillers repeat it).
+            let al1 = ALanes::gather(&nodes_a, &ids, 1);
+            let m3 = separation4(&al1, &sat.place_lanes(&nodes_b, &ids, 1), sat.s(), 0xF);
+            seen.push(m3.0[0]);
+            for &m in &seen {
+                if m > 0.0 {
+                    assert!(
+                        s64.is_some(),
+                        "{what}: f32 separates (margin {m:e}), f64 keeps: {:?} {:?} m {:?} t {:?}",
+                        c.a,
+                        c.b,
+                        c.m,
+                        c.t
+                    );
+                    assert!(
+                        m as f64 <= max64 * (1.0 + 1e-9) + 1e-300,
+                        "{what}: {m:e} > {max64:e}"
+                    );
+                }
+            }
+            // The arrangements agree (each lane computes the same operations), at least on
+            // the sign.
+            assert!(
+                seen.iter().all(|&m| (m > 0.0) == (seen[0] > 0.0)),
+                "{what}: {seen:?}"
+            );
+            out[k] = (s64.is_some(), seen[0] > 0.0);
+        }
+        out
+    }
+
+    fn random_node(rng: &mut Rng, centre: DVec3, size: f64) -> TNode {
+        let h = DVec3::new(rng.f(), rng.f(), rng.f()) * size;
+        // Some flat and some needle boxes.
+        let h = match rng.next() % 8 {
+            0 => DVec3::new(h.x, h.y, 0.0),
+            1 => DVec3::new(h.x, 0.0, 0.0),
+            _ => h,
+        };
+        node(&Obb {
+            center: centre,
+            axes: DMat3::from_quat(rng.rot()),
+            half_extents: h,
+        })
+    }
+
+    /// B placed so that its support along one of A's axes (or a cross axis) is `gap` away from
+    /// A's, measured exactly in f64 on the f32 boxes.
+    fn touching(rng: &mut Rng, offset: f64, size: f64, gap: f64) -> Case {
+        let ca = rng.v() * size + DVec3::splat(offset);
+        let a = random_node(rng, ca, size);
+        let cb = rng.v() * size - DVec3::splat(offset);
+        let b = random_node(rng, cb, size);
+        let m = if rng.next().is_multiple_of(3) {
+            // Nearly parallel to A's axes.
+            let eps = 1e-7 * rng.sym();
+            a.axes() * DMat3::from_quat(DQuat::from_rotation_z(eps)) * b.axes().transpose()
+        } else {
+            DMat3::from_quat(rng.rot())
+        };
+        let pa = a.axes();
+        let pb = m * b.axes();
+        let k = (rng.next() % 15) as usize;
+        let n = if k < 3 {
+            pa.col(k)
+        } else if k < 6 {
+            pb.col(k - 3)
+        } else {
+            let c = pa.col((k - 6) / 3).cross(pb.col((k - 6) % 3));
+            if c.length() < 1e-3 {
+                pa.col(0)
+            } else {
+                c.normalize()
+            }
+        };
+        let support = |ax: &DMat3, h: DVec3| {
+            h.x * n.dot(ax.col(0)).abs()
+                + h.y * n.dot(ax.col(1)).abs()
+                + h.z * n.dot(ax.col(2)).abs()
+        };
+        let dist = support(&pa, a.half()) + support(&pb, b.half()) + gap;
+        let want = a.center() + n * dist;
+        let t = want - m * b.center();
+        Case { a, b, m, t }
+    }
+
+    /// Four cases sharing the frame of the first (the lanes of one query share it).
+    fn share_frame(mut c: [Case; 4]) -> [Case; 4] {
+        for k in 1..4 {
+            c[k].m = c[0].m;
+            c[k].t = c[0].t;
+        }
+        c
+    }
+
+    #[test]
+    fn lanes_never_separate_what_f64_keeps_random() {
+        let mut rng = Rng(7);
+        let (mut total64, mut only64, mut both) = (0u32, 0u32, 0u32);
+        for k in 0..40_000 {
+            let size = [1.0, 1e-3, 50.0][k % 3];
+            let offset = [0.0, 10.0, 1e4][(k / 3) % 3];
+            let m = DMat3::from_quat(rng.rot());
+            let t = DVec3::splat(offset) + rng.v() * 3.0 * size;
+            let cases = [0; 4].map(|_| {
+                let ca = rng.v() * size + DVec3::splat(offset);
+                let a = random_node(&mut rng, ca, size);
+                let cb = rng.v() * size;
+                let b = random_node(&mut rng, cb, size);
+                Case { a, b, m, t }
+            });
+            for (s64, s32) in check4(&cases, "random") {
+                total64 += s64 as u32;
+                both += (s64 && s32) as u32;
+                only64 += (s64 && !s32) as u32;
+            }
+        }
+        // Sound (checked above) and nearly as sharp as the f64 test.
+        assert!(total64 > 40_000, "{total64}");
+        assert!(
+            only64 * 200 < total64,
+            "f32 keeps {only64} of {total64} ({both})"
+        );
+    }
+
+    #[test]
+    fn lanes_never_separate_what_f64_keeps_near_degenerate() {
+        let mut rng = Rng(11);
+        let (mut sep, mut near) = ([0u32; 2], [0u32; 2]);
+        for k in 0..20_000 {
+            let size: f64 = [1.0, 1e-6, 1e3, 1e-15, 1e12][k % 5];
+            let offset = [0.0, 1.0, 1e6, -3e3][(k / 5) % 4] * size.max(1.0);
+            let rel = [
+                0.0, 1e-15, -1e-15, 1e-12, -1e-12, 1e-9, 1e-6, -1e-6, 1e-4, 1e-2,
+            ][(k / 20) % 10];
+            let c = [0; 4].map(|_| touching(&mut rng, offset, size, rel * size));
+            // Each case with its own frame in lane 0 (the other lanes are fillers).
+            for x in 0..4 {
+                let r = check4(
+                    &[c[x], c[(x + 1) % 4], c[(x + 2) % 4], c[(x + 3) % 4]],
+                    "near-degenerate",
+                );
+                sep[0] += r[0].0 as u32;
+                sep[1] += r[0].1 as u32;
+            }
+            check4(&share_frame(c), "near-degenerate, shared frame");
+            // Gaps just around the f32 test's own threshold (its slack plus the f32 terms).
+            let c2 = touching(&mut Rng(k as u64), offset, size, 0.0);
+            let sh = c2.a.half().element_sum() + c2.b.half().element_sum();
+            let d1 = (c2.m * c2.b.center() + c2.t - c2.a.center())
+                .abs()
+                .element_sum();
+            let thr = 2.0 * c2.slack() + C_H as f64 * sh + C_D as f64 * d1;
+            let cases = [-0.3, -0.01, 0.0, 0.01].map(|rel| {
+                touching(
+                    &mut Rng(k as u64),
+                    offset,
+                    size,
+                    thr * (1.0 + rel + 0.3 * (k % 4) as f64),
+                )
+            });
+            for (s64, s32) in check4(&cases, "at the f32 threshold") {
+                near[0] += s64 as u32;
+                near[1] += s32 as u32;
+            }
+        }
+        assert!(sep[1] > 0 && sep[0] >= sep[1], "{sep:?}");
+        assert!(near[1] > 0 && near[0] > near[1], "{near:?}");
+    }
+
+    #[test]
+    fn f32_test_refuses_magnitudes_f32_cannot_hold() {
+        let m = DMat3::IDENTITY;
+        assert!(Sat32::new(m, DVec3::ZERO, 1e-13, 1.0).is_some());
+        assert!(Sat32::new(m, DVec3::ZERO, 1e-13, 1e31).is_none());
+        assert!(Sat32::new(m, DVec3::ZERO, 1e-40, 1e-25).is_none());
+        assert!(Sat32::new(m, DVec3::splat(f64::NAN), 1e-13, 1.0).is_none());
+        assert!(Sat32::new(m, DVec3::ZERO, f64::INFINITY, 1.0).is_none());
+        // Huge boxes at the top of the range: the test keeps what it cannot decide, never
+        // separates on overflow.
+        let big = Case {
+            a: unit_box(DVec3::ZERO),
+            b: node(&Obb {
+                center: DVec3::ZERO,
+                axes: DMat3::IDENTITY,
+                half_extents: DVec3::splat(1e29),
+            }),
+            m,
+            t: DVec3::new(1e29, 0.0, 0.0),
+        };
+        assert_eq!(check4(&[big; 4], "huge")[0], (false, false));
+    }
+
+    /// The quad layer holds exactly the nodes two levels below every internal node at even
+    /// depth, and its lanes give the gathered lanes' answers bit for bit.
+    #[test]
+    fn quads_equal_the_gathered_nodes() {
+        let mesh = frcd_geom::shapes::icosphere(1.0, 3);
+        for leaf in [1, 2, 3] {
+            let opts = crate::BuildOptions {
+                max_leaf_triangles: leaf,
+                ..Default::default()
+            };
+            let tree = crate::ObbTree::build(&mesh, &opts);
+            let nodes = &tree.nodes;
+            let sat = Sat32::new(
+                DMat3::from_quat(DQuat::from_rotation_x(0.4)),
+                DVec3::new(0.3, -0.2, 0.1),
+                1e-13,
+                3.0,
+            )
+            .unwrap();
+            let (mut with, mut depth) = (0, vec![0u32; nodes.len()]);
+            for n in 0..nodes.len() {
+                let q = tree.quads().of[n];
+                if nodes[n].is_leaf() {
+                    assert_eq!(q, NO_QUAD);
+                    continue;
+                }
+                depth[n + 1] = depth[n] + 1;
+                depth[nodes[n].right() as usize] = depth[n] + 1;
+                assert_eq!(q == NO_QUAD, depth[n] % 2 == 1, "node {n}");
+                if q == NO_QUAD {
+                    continue;
+                }
+                with += 1;
+                let quad = &tree.quads().quads[(q >> 2) as usize];
+                let (ids, len) = quad_ids(nodes, n as u32);
+                assert_eq!((q & 3) as usize + 1, len);
+                assert_eq!(quad.ids[..len], ids[..len]);
+                let g = ALanes::gather(nodes, &ids, len);
+                let f = ALanes::from_quad(quad);
+                let b = sat.place(&nodes[0]).splat();
+                let mask = (1 << len) - 1;
+                let (x, y) = (
+                    separation4(&g, &b, sat.s(), mask),
+                    separation4(&f, &b, sat.s(), mask),
+                );
+                assert_eq!(x.0[..len], y.0[..len]);
+                let a = ALanes::splat(&nodes[n]);
+                let (pl, pq) = (sat.place_lanes(nodes, &ids, len), sat.place_quad(quad));
+                let (x, y) = (
+                    separation4(&a, &pl, sat.s(), mask),
+                    separation4(&a, &pq, sat.s(), mask),
+                );
+                assert_eq!(x.0[..len], y.0[..len]);
+                for k in 0..len {
+                    assert_eq!(pl.lane(k).c, pq.lane(k).c);
+                }
+            }
+            assert!(with > 10, "{with}");
+        }
+    }
+
+    #[test]
+    fn hand_made_cases() {
+        let sat = |t: DVec3| Sat32::new(DMat3::IDENTITY, t, 4.0 * SLACK_REL, 4.0).unwrap();
+        let a = unit_box(DVec3::ZERO);
+        let b = unit_box(DVec3::new(2.0, 0.0, 0.0));
+        let one = |s: &Sat32, a: &TNode, b: &TNode| {
+            separation4(&ALanes::splat(a), &s.place(b).splat(), s.s(), 1).0[0]
+        };
+        // Face-touching: kept; a 1e-3 gap: separated with a margin below the gap.
+        let s = sat(DVec3::ZERO);
+        assert!(one(&s, &a, &b) <= 0.0);
+        let s = sat(DVec3::new(1e-3, 0.0, 0.0));
+        let m = one(&s, &a, &b);
+        assert!(m > 0.0 && m < 1e-3, "{m}");
+        // Only an edge-edge axis separates these.
+        let q = DQuat::from_rotation_x(std::f64::consts::FRAC_PI_4)
+            * DQuat::from_rotation_z(std::f64::consts::FRAC_PI_4);
+        let m = DMat3::from_quat(q);
+        let dir = DVec3::new(1.0, 1.0, 1.0).normalize();
+        let b = unit_box(DVec3::ZERO);
+        for (dist, apart) in [(10.0, true), (1.0, false)] {
+            let s = Sat32::new(m, dir * dist, 1e-12, 20.0).unwrap();
+            assert_eq!(one(&s, &a, &b) > 0.0, apart, "{dist}");
+            let f64_says = separation(&a, &Placed::new(&b, &m, dir * dist), 1e-12);
+            assert_eq!(f64_says.is_some(), apart);
+        }
+        // Lanes mix: four A boxes along x against one B, only the far ones separated.
+        let nodes: Vec<TNode> = (0..4)
+            .map(|k| unit_box(DVec3::new(3.0 * k as f64, 0.0, 0.0)))
+            .collect();
+        let s = sat(DVec3::ZERO);
+        let r = separation4(
+            &ALanes::gather(&nodes, &[0, 1, 2, 3], 4),
+            &s.place(&unit_box(DVec3::new(1.5, 0.0, 0.0))).splat(),
+            s.s(),
+            0xF,
+        );
+        assert_eq!(r.positive(), 0b1100, "{r:?}");
+    }
+}
