@@ -904,6 +904,10 @@ pub fn collide_cached(
         return c;
     }
     let first = request.mode == Mode::FirstContact;
+    // First contact keeps a witness exactly when the last query touched. Touching steps are
+    // the witness's job: a front recorded there holds the whole cut below the first hit and
+    // costs more to record and walk than a fresh wide traversal that stops at the first hit.
+    let was_touching = first && cache.witness.is_some();
     if first {
         if let Some((x, y)) = cache.witness {
             if ctx.tri_pair(x, y) {
@@ -926,7 +930,7 @@ pub fn collide_cached(
         // The walk may spend at most half a fresh traversal: a stale front is abandoned early.
         let budget = cache.fresh_work / 2;
         let mut hit = hit_fn(first, &mut found, &mut c.pairs);
-        let done = walk_front(
+        let (done, descents) = walk_front(
             &mut ctx,
             &old,
             &mut new,
@@ -936,7 +940,8 @@ pub fn collide_cached(
             &mut hit,
         );
         drop(hit);
-        let work = ctx.counters.work() - before + old.len() as u64 / 8;
+        let work =
+            ctx.counters.work() - before + old.len() as u64 / 8 + WALK_DESCENT_WORK * descents;
         old.clear();
         cache.front = new;
         cache.scratch = old;
@@ -959,7 +964,7 @@ pub fn collide_cached(
     if !use_front {
         cache.skip = cache.skip.saturating_sub(1);
         // Record a front only when the next query will try it.
-        let record = coherent && cache.skip == 0;
+        let record = coherent && cache.skip == 0 && !was_touching;
         let mut front = std::mem::take(&mut cache.front);
         front.clear();
         let before = ctx.counters.work();
@@ -1013,6 +1018,13 @@ fn hit_fn<'a>(
 /// kept as they are. Every leaf pair is covered exactly once whatever `old` holds, so the
 /// answer never depends on the cache. Returns `false` (the walk abandoned, its results
 /// incomplete) as soon as the walk's work exceeds `budget`.
+/// Extra work charged per descent a front walk starts, on top of its counters: a descent from a
+/// single pair pays a full f64 box test and placement, and a fresh wide traversal decides four
+/// pairs per test, so the walk's counters alone undercount its time next to a fresh traversal.
+const WALK_DESCENT_WORK: u64 = 2;
+
+/// Walks the front (see [`collide_cached`]): returns whether it finished within `budget`, and
+/// how many descents it started.
 fn walk_front(
     ctx: &mut Ctx<'_>,
     old: &[FrontEntry],
@@ -1021,8 +1033,9 @@ fn walk_front(
     first: bool,
     budget: u64,
     hit: &mut impl FnMut(u32, u32) -> bool,
-) -> bool {
+) -> (bool, u64) {
     let start = ctx.counters.work();
+    let mut descents = 0u64;
     let mut stack = Stack::new();
     let limit = clock + ctx.slack;
     let passes: &[Option<u8>] = if first {
@@ -1042,9 +1055,10 @@ fn walk_front(
                 new.push(*e);
                 continue;
             }
-            if ctx.counters.work() - start > budget {
-                return false;
+            if ctx.counters.work() - start + WALK_DESCENT_WORK * descents > budget {
+                return (false, descents);
             }
+            descents += 1;
             if ctx.descend(e.a, e.b, &mut stack, Some((new, clock)), hit) {
                 // First contact found: keep every entry not reached yet.
                 let rest = old.iter().enumerate().filter(|&(k2, e2)| {
@@ -1056,11 +1070,11 @@ fn walk_front(
                     }
                 });
                 new.extend(rest.map(|(_, e2)| *e2));
-                return true;
+                return (true, descents);
             }
         }
     }
-    true
+    (true, descents)
 }
 
 #[cfg(test)]
