@@ -96,6 +96,8 @@ pub struct ObbTree {
     /// lanes − 1 (or [`crate::wide::NO_QUAD`]). Built by the first collision query, so the
     /// build and trees never queried pay nothing.
     pub(crate) quads: std::sync::OnceLock<crate::wide::Quads>,
+    /// Whether the first query builds the quad layer (see [`ObbTree::with_quad_layer`]).
+    quad_layer: bool,
     /// Distance volumes (one rectangle swept sphere per node), built on the first distance or
     /// tolerance query (`crate::distance`), so collision-only users pay no memory.
     pub(crate) distance_volumes: std::sync::OnceLock<Vec<crate::distance::rss::DNode>>,
@@ -150,6 +152,7 @@ impl ObbTree {
         let radius_from_origin = aabb.min.abs().max(aabb.max.abs()).length();
         ObbTree {
             quads: std::sync::OnceLock::new(),
+            quad_layer: true,
             nodes,
             order,
             ends,
@@ -169,8 +172,42 @@ impl ObbTree {
     /// The quad layer of the wide traversal, built on first use.
     #[inline]
     pub(crate) fn quads(&self) -> &crate::wide::Quads {
-        self.quads
-            .get_or_init(|| crate::wide::build_quads(&self.nodes))
+        self.quads.get_or_init(|| {
+            if self.quad_layer {
+                crate::wide::build_quads(&self.nodes)
+            } else {
+                // No quads: every step gathers its four lanes from the nodes.
+                crate::wide::Quads {
+                    quads: Vec::new(),
+                    of: vec![crate::wide::NO_QUAD; self.nodes.len()],
+                }
+            }
+        })
+    }
+
+    /// The tree with or without the wide traversal's quad layer (on by default). The layer
+    /// copies the nodes two levels below each internal node at even depth into four-lane
+    /// blocks (about 77 B per triangle at leaf 2, built by the first collision query), so a
+    /// traversal step loads its lanes instead of gathering four nodes. Without it mesh + tree
+    /// stay at about 110-115 B per triangle and the box work is slower (the crate README gives
+    /// the measured cost); answers are the same either way.
+    ///
+    /// ```
+    /// use frcd_obb::{BuildOptions, ObbTree};
+    /// let mesh = frcd_geom::shapes::icosphere(1.0, 3);
+    /// let lean = ObbTree::build(&mesh, &BuildOptions::default()).with_quad_layer(false);
+    /// let fast = ObbTree::build(&mesh, &BuildOptions::default());
+    /// let (id, q) = (frcd_geom::Pose::IDENTITY, frcd_obb::Request::default());
+    /// assert_eq!(frcd_obb::collide(&lean, &id, &lean, &id, &q).collide, true);
+    /// frcd_obb::collide(&fast, &id, &fast, &id, &q);
+    /// assert!(lean.memory_bytes() < fast.memory_bytes());
+    /// ```
+    pub fn with_quad_layer(mut self, on: bool) -> Self {
+        if on != self.quad_layer {
+            self.quad_layer = on;
+            self.quads = std::sync::OnceLock::new();
+        }
+        self
     }
 
     /// The nodes, depth-first (node 0 is the root), as f64 views ([`ObbTree::node`]); builds

@@ -540,3 +540,46 @@ fn world_refuses_bad_input() {
     assert!(world.set_pose(other.unwrap(), Pose::IDENTITY).is_err());
     assert!(world.exclude_pair(id, id).is_err());
 }
+
+#[test]
+fn quad_layer_off_gives_the_same_answers_in_less_memory() {
+    // The quad layer only changes where a step loads its lanes from: with it off every query
+    // must give the oracle's answer, cached or not, and mesh + tree stay under 150 B per
+    // triangle at the default leaf size after queries have run.
+    let a = shapes::icosphere(1.0, 3);
+    let b = shapes::torus(1.0, 0.3, 24, 12).unwrap();
+    let opts = BuildOptions::default();
+    let (ta, tb) = (ObbTree::build(&a, &opts), ObbTree::build(&b, &opts));
+    let (la, lb) = (
+        ObbTree::build(&a, &opts).with_quad_layer(false),
+        ObbTree::build(&b, &opts).with_quad_layer(false),
+    );
+    let mut rng = StdRng::seed_from_u64(5);
+    let mut cache = PairCache::new();
+    let mut touching = 0;
+    for _ in 0..150 {
+        let (pa, pb) = (random_pose(&mut rng, 0.3), random_pose(&mut rng, 1.4));
+        for mode in [Mode::FirstContact, Mode::AllPairs] {
+            let req = Request {
+                mode,
+                ..Request::default()
+            };
+            let fast = collide(&ta, &pa, &tb, &pb, &req);
+            let lean = collide(&la, &pa, &lb, &pb, &req);
+            let cached = collide_cached(&la, &pa, &lb, &pb, &req, &mut cache);
+            assert_eq!(fast.collide, lean.collide);
+            assert_eq!(lean.collide, cached.collide);
+            if mode == Mode::AllPairs {
+                assert_eq!(fast.pairs, lean.pairs);
+                assert_eq!(lean.pairs, cached.pairs);
+                assert_eq!(lean.pairs, oracle::pairs(&a, &pa, &b, &pb));
+                touching += lean.collide as usize;
+            }
+        }
+    }
+    assert!(touching > 10, "{touching}");
+    let per_tri =
+        |t: &ObbTree, m: &TriMesh| (t.memory_bytes() + m.memory_bytes()) / m.triangle_count();
+    assert!(per_tri(&la, &a) < 150, "{}", per_tri(&la, &a));
+    assert!(per_tri(&ta, &a) > per_tri(&la, &a));
+}
