@@ -128,7 +128,12 @@ struct Pair {
 
 fn prepare(scene: Scene, opts: &BuildOptions) -> Pair {
     // The trees share the scene's meshes (no copy), so mesh + tree is what a user holds.
-    let tree = |i: usize| Arc::new(ObbTree::build_shared(scene.bodies[i].mesh.clone(), opts));
+    // FRCD_BENCH_NO_QUADS=1: trees without the wide traversal's quad layer (memory-bound
+    // engines' choice), to measure what the layer buys.
+    let quads = std::env::var("FRCD_BENCH_NO_QUADS").map_or(true, |v| v != "1");
+    let tree = |i: usize| {
+        Arc::new(ObbTree::build_shared(scene.bodies[i].mesh.clone(), opts).with_quad_layer(quads))
+    };
     let frcd = [tree(0), tree(1)];
     for t in &frcd {
         // A first query (each tree against itself, so it traverses) builds the wide
