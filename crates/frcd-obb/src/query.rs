@@ -2,6 +2,7 @@
 //! with the hybrid top volume, optional solid-mode containment and a caller-owned coherence
 //! cache.
 
+use crate::nodes::TNode;
 use crate::sat::{self, Placed, SLACK_REL};
 use crate::solid::point_inside;
 use crate::tree::ObbTree;
@@ -216,6 +217,42 @@ const SEPARATED: u8 = 0;
 const OVERLAP: u8 = 1;
 const UNTESTED: u8 = 2;
 
+/// The front a traversal records into, if any, with the cache's motion clock.
+type Recording<'f> = Option<(&'f mut Vec<FrontEntry>, f64)>;
+
+/// Records a separated pair (bound: clock + `margin`) when a front is being recorded.
+#[inline(always)]
+fn record_separated(front: &mut Recording<'_>, a: u32, b: u32, margin: f64) {
+    if let Some((f, clock)) = front {
+        f.push(FrontEntry {
+            a,
+            b,
+            kind: SEPARATED,
+            bound: *clock + margin,
+        });
+    }
+}
+
+/// Records a pair of another kind ([`OVERLAP`], [`UNTESTED`]) when a front is being recorded.
+#[inline(always)]
+fn record_pairs(front: &mut Recording<'_>, kind: u8, pairs: impl Iterator<Item = (u32, u32)>) {
+    if let Some((f, _)) = front {
+        f.extend(pairs.map(|(a, b)| FrontEntry {
+            a,
+            b,
+            kind,
+            bound: f64::NEG_INFINITY,
+        }));
+    }
+}
+
+/// Which node of a pair the traversal splits: A unless B is the bigger internal node (a rule
+/// that depends on the trees only, so the traversal tree is the same every query).
+#[inline(always)]
+fn split_a(na: &TNode, nb: &TNode) -> bool {
+    nb.is_leaf() || (!na.is_leaf() && na.size2() >= nb.size2())
+}
+
 /// Caller-owned frame-to-frame state for [`collide_cached`] on one pair of trees.
 ///
 /// Holds the last witness triangle pair (tested first in [`Mode::FirstContact`]) and the
@@ -407,14 +444,7 @@ impl<'a> Ctx<'a> {
     fn children(&self, i: u32, j: u32) -> [(u32, u32); 2] {
         let na = &self.a.nodes[i as usize];
         let nb = &self.b.nodes[j as usize];
-        let split_a = if nb.is_leaf() {
-            true
-        } else if na.is_leaf() {
-            false
-        } else {
-            na.size2() >= nb.size2()
-        };
-        if split_a {
+        if split_a(na, nb) {
             [(i + 1, j), (na.right(), j)]
         } else {
             [(i, j + 1), (i, nb.right())]
@@ -463,7 +493,7 @@ impl<'a> Ctx<'a> {
         i: u32,
         j: u32,
         stack: &mut Stack,
-        front: Option<(&mut Vec<FrontEntry>, f64)>,
+        front: Recording<'_>,
         hit: &mut impl FnMut(u32, u32) -> bool,
     ) -> bool {
         match self.sat32 {
@@ -478,7 +508,7 @@ impl<'a> Ctx<'a> {
         i: u32,
         j: u32,
         stack: &mut Stack,
-        mut front: Option<(&mut Vec<FrontEntry>, f64)>,
+        mut front: Recording<'_>,
         hit: &mut impl FnMut(u32, u32) -> bool,
     ) -> bool {
         let base = stack.pairs.len();
@@ -494,34 +524,14 @@ impl<'a> Ctx<'a> {
             let (i, j, p) = stack.pairs.pop().expect("non-empty");
             stack.placed.truncate(p as usize + 1);
             if let Some((_, margin)) = self.separation(i, &stack.placed[p as usize]) {
-                if let Some((f, clock)) = &mut front {
-                    f.push(FrontEntry {
-                        a: i,
-                        b: j,
-                        kind: SEPARATED,
-                        bound: *clock + margin,
-                    });
-                }
+                record_separated(&mut front, i, j, margin);
                 continue;
             }
             if self.both_leaves(i, j) {
-                if let Some((f, _)) = &mut front {
-                    f.push(FrontEntry {
-                        a: i,
-                        b: j,
-                        kind: OVERLAP,
-                        bound: f64::NEG_INFINITY,
-                    });
-                }
+                record_pairs(&mut front, OVERLAP, std::iter::once((i, j)));
                 if self.leaf_pair(i, j, hit) {
-                    if let Some((f, _)) = &mut front {
-                        f.extend(stack.pairs[base..].iter().map(|&(a, b, _)| FrontEntry {
-                            a,
-                            b,
-                            kind: UNTESTED,
-                            bound: f64::NEG_INFINITY,
-                        }));
-                    }
+                    let rest = stack.pairs[base..].iter().map(|&(a, b, _)| (a, b));
+                    record_pairs(&mut front, UNTESTED, rest);
                     stack.pairs.truncate(base);
                     stack.placed.truncate(pbase);
                     return true;
@@ -559,7 +569,7 @@ impl<'a> Ctx<'a> {
         i: u32,
         j: u32,
         stack: &mut Stack,
-        mut front: Option<(&mut Vec<FrontEntry>, f64)>,
+        mut front: Recording<'_>,
         hit: &mut impl FnMut(u32, u32) -> bool,
     ) -> bool {
         let base = stack.pairs.len();
@@ -579,14 +589,7 @@ impl<'a> Ctx<'a> {
             (m.0[0] > 0.0).then(|| wide::margin64(m.0[0]))
         };
         if let Some(margin) = margin {
-            if let Some((f, clock)) = &mut front {
-                f.push(FrontEntry {
-                    a: i,
-                    b: j,
-                    kind: SEPARATED,
-                    bound: *clock + margin,
-                });
-            }
+            record_separated(&mut front, i, j, margin);
             return false;
         }
         let (qa_all, qb_all) = (a.quads(), b.quads());
@@ -600,37 +603,17 @@ impl<'a> Ctx<'a> {
             let na = &a.nodes[i as usize];
             let nb = &b.nodes[j as usize];
             if na.is_leaf() && nb.is_leaf() {
-                if let Some((f, _)) = &mut front {
-                    f.push(FrontEntry {
-                        a: i,
-                        b: j,
-                        kind: OVERLAP,
-                        bound: f64::NEG_INFINITY,
-                    });
-                }
+                record_pairs(&mut front, OVERLAP, std::iter::once((i, j)));
                 if self.leaf_pair(i, j, hit) {
-                    if let Some((f, _)) = &mut front {
-                        f.extend(stack.pairs[base..].iter().map(|&(a, b, _)| FrontEntry {
-                            a,
-                            b,
-                            kind: UNTESTED,
-                            bound: f64::NEG_INFINITY,
-                        }));
-                    }
+                    let rest = stack.pairs[base..].iter().map(|&(a, b, _)| (a, b));
+                    record_pairs(&mut front, UNTESTED, rest);
                     stack.pairs.truncate(base);
                     stack.placed32.truncate(pbase);
                     return true;
                 }
                 continue;
             }
-            let split_a = if nb.is_leaf() {
-                true
-            } else if na.is_leaf() {
-                false
-            } else {
-                na.size2() >= nb.size2()
-            };
-            if split_a {
+            if split_a(na, nb) {
                 let qa = qa_all.of[i as usize];
                 let (ids, n, lanes) = if qa != NO_QUAD {
                     let q = &qa_all.quads[(qa >> 2) as usize];
@@ -657,14 +640,7 @@ impl<'a> Ctx<'a> {
                 }
                 for k in (0..n).rev() {
                     if m.0[k] > 0.0 {
-                        if let Some((f, clock)) = &mut front {
-                            f.push(FrontEntry {
-                                a: ids[k],
-                                b: j,
-                                kind: SEPARATED,
-                                bound: *clock + wide::margin64(m.0[k]),
-                            });
-                        }
+                        record_separated(&mut front, ids[k], j, wide::margin64(m.0[k]));
                     } else {
                         stack.pairs.push((ids[k], j, p));
                     }
@@ -699,14 +675,7 @@ impl<'a> Ctx<'a> {
                 }
                 for k in (0..n).rev() {
                     if m.0[k] > 0.0 {
-                        if let Some((f, clock)) = &mut front {
-                            f.push(FrontEntry {
-                                a: i,
-                                b: ids[k],
-                                kind: SEPARATED,
-                                bound: *clock + wide::margin64(m.0[k]),
-                            });
-                        }
+                        record_separated(&mut front, i, ids[k], wide::margin64(m.0[k]));
                     } else {
                         let q = stack.placed32.len() as u32;
                         stack.placed32.push(lanes.lane(k));

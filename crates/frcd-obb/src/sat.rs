@@ -116,17 +116,19 @@ fn disjoint(a: &TNode, b: &Placed, slack: f64) -> bool {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::nodes::compact_box;
     use frcd_geom::{DQuat, Obb, Pose};
 
-    fn node(obb: &Obb) -> TNode {
+    /// A traversal node holding `obb` (shared with the wide test's tests).
+    pub(crate) fn node(obb: &Obb) -> TNode {
         let (c, h, u) = compact_box(obb);
         TNode { c, h, u, link: 0 }
     }
 
-    fn unit_box(center: DVec3) -> TNode {
+    /// An axis-aligned unit-half-extent node at `center`.
+    pub(crate) fn unit_box(center: DVec3) -> TNode {
         node(&Obb {
             center,
             axes: DMat3::IDENTITY,

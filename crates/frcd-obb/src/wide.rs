@@ -559,22 +559,9 @@ pub(crate) fn margin64(m: f32) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nodes::compact_box;
+    use crate::sat::tests::{node, unit_box};
     use crate::sat::{Placed, SLACK_REL, separation};
     use frcd_geom::{DQuat, Obb};
-
-    fn node(obb: &Obb) -> TNode {
-        let (c, h, u) = compact_box(obb);
-        TNode { c, h, u, link: 0 }
-    }
-
-    fn unit_box(center: DVec3) -> TNode {
-        node(&Obb {
-            center,
-            axes: DMat3::IDENTITY,
-            half_extents: DVec3::ONE,
-        })
-    }
 
     /// All 15 margins of the f64 test (no early exit), before [`MARGIN_SCALE`].
     fn margins64(a: &TNode, b: &Placed, slack: f64) -> [f64; 15] {
