@@ -346,9 +346,9 @@ impl GpuContext {
     /// A tree with a leaf of more than [`MAX_LEAF_TRIANGLES`] triangles is
     /// [`GpuError::MeshTooLarge`].
     pub fn upload(&self, tree: &ObbTree) -> Result<GpuMesh, GpuError> {
-        let max_leaf = tree
-            .nodes()
-            .iter()
+        // Node by node: `ObbTree::nodes` would build a whole f64 copy of the tree only for this.
+        let max_leaf = (0..tree.node_count() as u32)
+            .map(|i| tree.node(i))
             .filter(|n| n.is_leaf())
             .map(|n| n.count)
             .max()
