@@ -4,7 +4,7 @@
 
 use crate::nodes::TNode;
 use crate::sat::{self, Placed, SLACK_REL};
-use crate::solid::point_inside;
+use crate::solid::point_inside_tree;
 use crate::tree::ObbTree;
 use crate::wide::{self, ALanes, NO_QUAD, Placed32, Sat32, quad_ids};
 use frcd_geom::{Aabb, DMat3, DVec3, Pose, Triangle};
@@ -705,35 +705,17 @@ pub(crate) fn contained(
     seed: u64,
 ) -> Option<Containment> {
     if a.closed {
-        let bounds = a.aabb;
-        let n = a.triangle_count();
         for &p in &b.component_points {
             let p = frame.point(p);
-            if point_inside(p, n, |i| a.triangle(i as u32), &bounds, seed) == Some(true) {
+            if point_inside_tree(p, a, None, seed) == Some(true) {
                 return Some(Containment::BInsideA);
             }
         }
     }
     if b.closed {
-        // Cheap conservative cull first: a point outside B's mapped box is outside B.
-        let rough = frame.aabb(&b.aabb, query_slack(a, b, frame));
-        if !a.component_points.iter().any(|p| rough.contains_point(*p)) {
-            return None;
-        }
-        let n = b.triangle_count();
-        // The bounds must hold the mapped triangles exactly: build them from the mapped triangles.
-        let bounds = b
-            .triangles()
-            .fold(Aabb::EMPTY, |acc, t| acc.union(&frame.triangle(&t).aabb()));
+        let slack = query_slack(a, b, frame);
         for &p in &a.component_points {
-            if point_inside(
-                p,
-                n,
-                |i| frame.triangle(&b.triangle(i as u32)),
-                &bounds,
-                seed,
-            ) == Some(true)
-            {
+            if point_inside_tree(p, b, Some((frame, slack)), seed) == Some(true) {
                 return Some(Containment::AInsideB);
             }
         }

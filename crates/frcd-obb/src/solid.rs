@@ -1,5 +1,8 @@
 //! Point-in-mesh parity on exact orientation predicates, for solid-mode queries.
 
+use crate::nodes::TNode;
+use crate::query::RelativeFrame;
+use crate::tree::ObbTree;
 use frcd_geom::predicates::{collinear3, orient3d};
 use frcd_geom::{Aabb, DVec3, Triangle};
 
@@ -148,6 +151,107 @@ pub(crate) fn point_inside(
     None
 }
 
+/// [`point_inside`] against a closed tree's mesh, visiting only the leaves whose box meets the
+/// ray's box: O(log n + leaves along the ray) instead of every triangle.
+///
+/// With `map = Some((frame, slack))` the mesh is B's of a query, its triangles mapped into A's
+/// frame by `frame` (exactly as [`RelativeFrame::triangle`] maps them for every other CPU test)
+/// and `slack` the query's (`query_slack`), which covers the rounding of mapping a box.
+///
+/// Same answer as [`point_inside`] over all the (mapped) triangles: a node is skipped only when
+/// its box, which holds every triangle below it, misses the segment's box, and such triangles
+/// are skipped by [`point_inside`]'s own per-triangle box filter too. (With a frame the ray's far
+/// end is placed beyond the mapped tree box instead of beyond the mapped triangles' box: a
+/// different segment to a point outside the mesh, hence the same parity.)
+pub(crate) fn point_inside_tree(
+    p: DVec3,
+    tree: &ObbTree,
+    map: Option<(&RelativeFrame, f64)>,
+    seed: u64,
+) -> Option<bool> {
+    let bounds = match map {
+        None => tree.aabb,
+        Some((frame, slack)) => {
+            let b = frame.aabb(&tree.aabb, slack);
+            if b.min.is_finite() && b.max.is_finite() {
+                b
+            } else {
+                // The slack overflows for extents near 1e154 and beyond (it is built from
+                // lengths): the box of the mapped triangles themselves, one pass over them.
+                tree.triangles()
+                    .fold(Aabb::EMPTY, |acc, t| acc.union(&frame.triangle(&t).aabb()))
+            }
+        }
+    };
+    if !bounds.contains_point(p) {
+        return Some(false);
+    }
+    let node_box = |n: &TNode| {
+        let local = local_box(n);
+        match map {
+            None => local,
+            Some((frame, slack)) => frame.aabb(&local, slack),
+        }
+    };
+    let triangle = |i: u32| {
+        let t = tree.triangle(i);
+        match map {
+            None => t,
+            Some((frame, _)) => frame.triangle(&t),
+        }
+    };
+    let mut stack: Vec<u32> = Vec::with_capacity(64);
+    'rays: for k in 0..MAX_RAYS {
+        let Some(q) = ray_end(p, direction(seed, k), &bounds) else {
+            continue 'rays;
+        };
+        let seg = Aabb::new(p.min(q), p.max(q));
+        let mut crossings = 0u32;
+        stack.clear();
+        stack.push(0);
+        while let Some(i) = stack.pop() {
+            let n = &tree.nodes[i as usize];
+            let b = node_box(n);
+            // A box that is not finite (coordinates beyond f32) culls nothing.
+            if b.min.is_finite() && b.max.is_finite() && !seg.intersects(&b) {
+                continue;
+            }
+            if !n.is_leaf() {
+                stack.push(n.right());
+                stack.push(i + 1);
+                continue;
+            }
+            for &ti in tree.node_triangles(i) {
+                let t = triangle(ti);
+                if !seg.intersects(&t.aabb()) {
+                    continue;
+                }
+                match ray_hit(p, q, &t) {
+                    Hit::Miss => {}
+                    Hit::Cross => crossings += 1,
+                    Hit::Degenerate => continue 'rays,
+                }
+            }
+        }
+        return Some(crossings % 2 == 1);
+    }
+    None
+}
+
+/// The axis-aligned box of a traversal node's f32 box `{c + U s : |s_k| ≤ h_k}` in the mesh's
+/// frame, rounded outward: `c ± Σ_k |u_k| h_k`, where each product of two f32 values is exact in
+/// f64 and the two sums and `c ± r` round by at most `2⁻⁵¹ (|c| + r)` in all, covered by the
+/// `2⁻⁵⁰` pad (plus the smallest normal for subnormal coordinates).
+fn local_box(n: &TNode) -> Aabb {
+    let c = n.center();
+    let h = n.half();
+    let u = n.axes();
+    let r = u.x_axis.abs() * h.x + u.y_axis.abs() * h.y + u.z_axis.abs() * h.z;
+    let pad = (r + c.abs()) * (1.0 / (1u64 << 50) as f64) + DVec3::splat(f64::MIN_POSITIVE);
+    let e = r + pad;
+    Aabb::new(c - e, c + e)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -184,6 +288,115 @@ mod tests {
                 point_inside(DVec3::new(0.0, 0.0, 0.99), 12, |i| tris[i], &c.aabb(), seed),
                 Some(true)
             );
+        }
+    }
+}
+
+/// The tree-accelerated parity against the plain loop over every triangle.
+#[cfg(test)]
+mod tree_tests {
+    use super::*;
+    use crate::BuildOptions;
+    use frcd_geom::{DQuat, Pose, TriMesh, shapes};
+    use rand::{Rng, SeedableRng};
+
+    fn meshes() -> Vec<TriMesh> {
+        let knot = shapes::torus_knot(&shapes::TorusKnotParams::default()).unwrap();
+        let gear = shapes::spur_gear(&shapes::SpurGearParams::default()).unwrap();
+        vec![
+            shapes::icosphere(1.0, 3),
+            shapes::cuboid(DVec3::new(1.0, 0.2, 0.5)),
+            knot,
+            gear,
+        ]
+    }
+
+    /// Points all over the mesh's box and just off its vertices (both sides of the surface).
+    fn points(mesh: &TriMesh, rng: &mut rand::rngs::StdRng, n: usize) -> Vec<DVec3> {
+        let b = mesh.aabb();
+        let size = (b.max - b.min).length();
+        let verts = mesh.vertices();
+        (0..n)
+            .map(|k| {
+                let r = DVec3::new(rng.random(), rng.random(), rng.random());
+                if k % 2 == 0 {
+                    b.min + (b.max - b.min) * (r * 1.2 - 0.1)
+                } else {
+                    let v = verts[rng.random_range(0..verts.len())];
+                    v + (r * 2.0 - 1.0) * (size * 1e-3)
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn tree_parity_equals_the_plain_loop() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+        for (m, mesh) in meshes().iter().enumerate() {
+            for leaf in [1, 4] {
+                let opts = BuildOptions {
+                    max_leaf_triangles: leaf,
+                    ..BuildOptions::default()
+                };
+                let tree = ObbTree::build(mesh, &opts);
+                assert!(tree.closed, "mesh {m}");
+                let tris: Vec<Triangle> = mesh.triangles().collect();
+                let (mut inside, mut outside) = (0, 0);
+                // Unmapped: the tree's own frame.
+                for p in points(mesh, &mut rng, 400) {
+                    let want = point_inside(p, tris.len(), |i| tris[i], &tree.aabb, 3);
+                    assert_eq!(point_inside_tree(p, &tree, None, 3), want, "mesh {m} {p}");
+                    inside += (want == Some(true)) as u32;
+                    outside += (want == Some(false)) as u32;
+                }
+                // Mapped: the tree as B of a query, its triangles in A's frame.
+                for k in 0..8 {
+                    let pose_a = Pose::new(
+                        DVec3::new(rng.random(), rng.random(), rng.random()) * 3.0,
+                        DQuat::from_rotation_x(k as f64) * DQuat::from_rotation_z(1.1),
+                    );
+                    let pose_b = Pose::new(
+                        DVec3::new(rng.random(), rng.random(), rng.random()) * 3.0,
+                        DQuat::from_rotation_y(0.7 * k as f64),
+                    );
+                    let frame = RelativeFrame::new(&pose_a, &pose_b);
+                    let slack = crate::query::query_slack(&tree, &tree, &frame);
+                    let mapped: Vec<Triangle> = tris.iter().map(|t| frame.triangle(t)).collect();
+                    let bounds = mapped
+                        .iter()
+                        .fold(Aabb::EMPTY, |acc, t| acc.union(&t.aabb()));
+                    for p in points(mesh, &mut rng, 60) {
+                        let p = frame.point(p);
+                        let want = point_inside(p, mapped.len(), |i| mapped[i], &bounds, 5);
+                        let got = point_inside_tree(p, &tree, Some((&frame, slack)), 5);
+                        assert_eq!(got, want, "mesh {m} pose {k} {p}");
+                        inside += (want == Some(true)) as u32;
+                    }
+                }
+                assert!(
+                    inside > 50 && outside > 50,
+                    "{m}: {inside} in, {outside} out"
+                );
+            }
+        }
+    }
+
+    /// Boxes beyond f32's range (not finite as f32 nodes) cull nothing, and subnormal-scale
+    /// boxes still hold their triangles: the answers stay those of the plain loop.
+    #[test]
+    fn tree_parity_at_extreme_magnitudes() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(12);
+        for scale in [1e-42, 1e-30, 1e30, 1e45, 1e300] {
+            let mesh = shapes::icosphere(scale, 2);
+            let tree = ObbTree::build(&mesh, &BuildOptions::default());
+            let tris: Vec<Triangle> = mesh.triangles().collect();
+            let mut inside = 0;
+            for p in points(&mesh, &mut rng, 200) {
+                let want = point_inside(p, tris.len(), |i| tris[i], &tree.aabb, 9);
+                assert_eq!(point_inside_tree(p, &tree, None, 9), want, "{scale:e} {p}");
+                inside += (want == Some(true)) as u32;
+            }
+            assert!(inside > 20, "{scale:e}: {inside}");
         }
     }
 }

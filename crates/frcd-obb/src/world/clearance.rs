@@ -470,25 +470,17 @@ fn containment_apart(
                 )
         });
         if !outside {
-            let bounds = a.aabb;
-            let n = a.triangle_count();
             for &p in &b.component_points {
                 let p = frame.point(p);
-                if crate::solid::point_inside(
-                    p,
-                    n,
-                    |i| a.triangle(i as u32),
-                    &bounds,
-                    CONTAINMENT_SEED,
-                ) == Some(true)
-                {
+                if crate::solid::point_inside_tree(p, a, None, CONTAINMENT_SEED) == Some(true) {
                     return Some(crate::Containment::BInsideA);
                 }
             }
         }
     }
     if b.closed {
-        let rough = frame.aabb(&b.aabb, crate::query::query_slack(a, b, frame));
+        let slack = crate::query::query_slack(a, b, frame);
+        let rough = frame.aabb(&b.aabb, slack);
         if !a.component_points.iter().any(|p| rough.contains_point(*p)) {
             return None;
         }
@@ -504,18 +496,9 @@ fn containment_apart(
         if outside {
             return None;
         }
-        let n = b.triangle_count();
-        let bounds = b.triangles().fold(frcd_geom::Aabb::EMPTY, |acc, t| {
-            acc.union(&frame.triangle(&t).aabb())
-        });
         for &p in &a.component_points {
-            if crate::solid::point_inside(
-                p,
-                n,
-                |i| frame.triangle(&b.triangle(i as u32)),
-                &bounds,
-                CONTAINMENT_SEED,
-            ) == Some(true)
+            if crate::solid::point_inside_tree(p, b, Some((frame, slack)), CONTAINMENT_SEED)
+                == Some(true)
             {
                 return Some(crate::Containment::AInsideB);
             }
