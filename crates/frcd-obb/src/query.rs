@@ -258,7 +258,8 @@ fn split_a(na: &TNode, nb: &TNode) -> bool {
 /// Holds the last witness triangle pair (tested first in [`Mode::FirstContact`]) and the
 /// traversal front of the last traversal: the node pairs where it stopped, each separated pair
 /// with its separation margin. Between queries the cache bounds how far any point of B moved
-/// in A's frame (`|Δt| + ‖ΔM‖_F · r_B`, summed into a motion clock); a separated front pair
+/// in A's frame (`|Δt| + ‖ΔM‖₂ · r_v`, `r_v` the largest vertex distance from B's origin,
+/// summed into a motion clock); a separated front pair
 /// whose margin exceeds the motion since its test is still separated and is not tested again
 /// (the argument holds for the fixed separating direction, so it is exact, not a heuristic).
 /// The others are tested again and traversed below where they overlap; leaf pairs whose boxes
@@ -313,13 +314,10 @@ impl PairCache {
             self.key = key;
         }
         if let Some(p) = self.prev {
-            // A bound on |frame(p) - prev(p)| for every B-local point p, rounded up.
-            let dm = frame.m - p.m;
-            let fro = (dm.x_axis.length_squared()
-                + dm.y_axis.length_squared()
-                + dm.z_axis.length_squared())
-            .sqrt();
-            let delta = (frame.t - p.t).length() + fro * b.radius_from_origin;
+            // A bound on |frame(v) - prev(v)| for every vertex v of B (hence every point of
+            // B's triangles, convex combinations of them), rounded up.
+            let delta = (frame.t - p.t).length() * (1.0 + 1e-15)
+                + rotation_change_bound(&p.m, &frame.m) * b.vertex_radius;
             self.delta = delta;
             self.clock += delta * (1.0 + 1e-9);
             if !self.clock.is_finite() {
@@ -329,6 +327,96 @@ impl PairCache {
         }
         self.prev = Some(*frame);
     }
+}
+
+/// An upper bound on `‖M1 − M0‖₂` for two near-rotation matrices (the relative frames of two
+/// queries): about `2 sin(θ/2)` for a turn by `θ` between them, the exact value for exact
+/// rotations, where [`spectral_norm_bound`] gives `√(4/3)` times that.
+///
+/// With `η_k ≥ ‖M_kᵀM_k − I‖₂` (their Frobenius norms, computed and rounded up) and the exact
+/// product `P = M1 M0ᵀ`: `M1 − M0 = (P − I) M0 + M1 (I − M0ᵀM0)`, so
+/// `‖M1 − M0‖ ≤ ‖P − I‖·√(1 + η0) + √(1 + η1)·η0`. `PᵀP − I = M0 (M1ᵀM1 − I) M0ᵀ +
+/// (M0M0ᵀ − I)`, so `‖PᵀP − I‖ ≤ η_P = η0 + (1 + η0) η1`; then the orthogonal factor `Q` of
+/// `P`'s polar decomposition is within `η_P` of `P`, and `‖P − I‖ ≤ ‖Q − I‖ + η_P`. When
+/// `tr Q > 1`, `Q` is a rotation (a reflection has trace at most 1), by an angle `φ` with
+/// `‖Q − I‖₂ = 2 sin(φ/2) = √(3 − tr Q)`, and `tr Q ≥ tr P − 3η_P`. `tr P = Σ M1_ij M0_ij`
+/// is computed within `30ε`. Otherwise (a turn beyond 90° between two queries, or matrices far
+/// from rotations) it falls back to [`spectral_norm_bound`], and it never returns more.
+pub(crate) fn rotation_change_bound(m0: &DMat3, m1: &DMat3) -> f64 {
+    let defect = |m: &DMat3| {
+        let g = m.transpose() * *m - DMat3::IDENTITY;
+        let f = (g.x_axis.length_squared() + g.y_axis.length_squared() + g.z_axis.length_squared())
+            .sqrt();
+        // Each entry of MᵀM is within 3ε·(1 + η) of the exact one; 64ε covers them all.
+        f * (1.0 + 1e-12) + 64.0 * f64::EPSILON
+    };
+    let (e0, e1) = (defect(m0), defect(m1));
+    let ep = e0 + (1.0 + e0) * e1;
+    let tr = m1.x_axis.dot(m0.x_axis) + m1.y_axis.dot(m0.y_axis) + m1.z_axis.dot(m0.z_axis);
+    let tr_q = tr - 3.0 * ep - 30.0 * f64::EPSILON;
+    if !(ep < 1e-6 && tr_q > 1.0) {
+        return spectral_norm_bound(*m1 - *m0);
+    }
+    let q_minus_i = (3.0 - tr_q).max(0.0).sqrt();
+    let bound = (q_minus_i + ep) * (1.0 + e0).sqrt() + (1.0 + e1).sqrt() * e0;
+    // Both are bounds: the general one is the tighter for turns under about 10⁻⁶ rad, where
+    // the rounding floor `√(3η_P)` of this one dominates.
+    (bound * (1.0 + 1e-12)).min(spectral_norm_bound(*m1 - *m0))
+}
+
+/// An upper bound on the spectral norm `‖D‖₂` (the largest factor by which `D` stretches a
+/// vector), about `√(4/3)·2 sin(θ/2)` for the difference of two rotations by `θ` against the
+/// Frobenius norm's `√2·2 sin(θ/2)`.
+///
+/// `‖D‖₂² = λ_max(G)` for `G = DᵀD`. The computed `G` is exactly symmetric (entry `ij` and `ji`
+/// are the same products summed in the same order) and differs from the exact one by at most
+/// `3ε·tr G` per entry, so by Weyl's inequality its largest eigenvalue is within `27ε·tr G` of
+/// the exact one. The eigenvalues `λ_k` of a symmetric 3×3 matrix with mean `μ = tr G / 3` and
+/// variance `σ² = ‖G‖_F² / 3 − μ²` satisfy `λ_max ≤ μ + √2·σ` (Laguerre-Samuelson). The
+/// variance is formed by a subtraction: its rounding, at most `8ε (‖G‖_F²/3 + μ²)`, is added
+/// before the square root; the result is rounded up by a relative `10⁻¹²`.
+pub(crate) fn spectral_norm_bound(d: DMat3) -> f64 {
+    // Scaled exactly by powers of two so the largest entry is in [1, 2) (nothing under- or
+    // overflows in G or its squares), the bound scaled back, plus the smallest normal number
+    // against rounding in the subnormal range.
+    let pow2 = |e: i32| f64::from_bits(((e + 1023) as u64) << 52);
+    let cols = [d.x_axis.abs(), d.y_axis.abs(), d.z_axis.abs()];
+    let m = cols[0].max(cols[1]).max(cols[2]).max_element();
+    if m == 0.0 {
+        return 0.0;
+    }
+    if !m.is_finite() {
+        return f64::INFINITY;
+    }
+    let (d, pre) = if m < pow2(-900) {
+        (d * pow2(600), pow2(-600))
+    } else {
+        (d, 1.0)
+    };
+    let e = ((d
+        .x_axis
+        .abs()
+        .max(d.y_axis.abs())
+        .max(d.z_axis.abs())
+        .max_element()
+        .to_bits()
+        >> 52) as i32)
+        - 1023;
+    let b = scaled_spectral_bound(d * pow2(-e));
+    b * pow2(e) * pre + f64::MIN_POSITIVE
+}
+
+/// [`spectral_norm_bound`] for a matrix whose largest entry is in `[1, 2)`.
+fn scaled_spectral_bound(d: DMat3) -> f64 {
+    let g = d.transpose() * d;
+    let cols = [g.x_axis, g.y_axis, g.z_axis];
+    let tr = g.x_axis.x + g.y_axis.y + g.z_axis.z;
+    let f2: f64 = cols.iter().map(|c| c.length_squared()).sum();
+    let mean = tr / 3.0;
+    let spread = f2 / 3.0 - mean * mean;
+    let var = spread.max(0.0) + 8.0 * f64::EPSILON * (f2 / 3.0 + mean * mean);
+    let lambda = mean + (2.0 * var).sqrt() + 27.0 * f64::EPSILON * tr;
+    lambda.sqrt() * (1.0 + 1e-12)
 }
 
 /// The traversal stack: node pairs, each naming its B box (placed in A's frame) in `placed`
@@ -874,30 +962,25 @@ pub fn collide_cached(
     let coherent = cache.delta <= 0.1 * a.sphere.radius.min(b.sphere.radius);
     let mut use_front = coherent && !cache.front.is_empty() && cache.skip == 0;
     if use_front {
-        let mut old = std::mem::take(&mut cache.front);
-        let mut new = std::mem::take(&mut cache.scratch);
-        new.clear();
+        let walked = cache.front.len();
         let before = ctx.counters.work();
         // The walk may spend at most half a fresh traversal: a stale front is abandoned early.
         let budget = cache.fresh_work / 2;
         let mut hit = hit_fn(first, &mut found, &mut c.pairs);
         let (done, descents) = walk_front(
             &mut ctx,
-            &old,
-            &mut new,
+            &mut cache.front,
+            &mut cache.scratch,
             cache.clock,
-            first,
             budget,
             &mut hit,
         );
         drop(hit);
-        let work =
-            ctx.counters.work() - before + old.len() as u64 / 8 + WALK_DESCENT_WORK * descents;
-        old.clear();
-        cache.front = new;
-        cache.scratch = old;
-        if !done || 10 * work > 9 * cache.fresh_work {
-            // The front saved less than a tenth of a fresh traversal: drop it and back off.
+        let work = ctx.counters.work() - before + walked as u64 / 8 + WALK_DESCENT_WORK * descents;
+        if !done || 4 * work > 3 * cache.fresh_work {
+            // The front saved less than a quarter of a fresh traversal's work: drop it and back
+            // off (a walk's work unit costs more time than a fresh wide traversal's, so a
+            // smaller saving did not pay in time: measured on the near-contact knots).
             cache.front.clear();
             cache.backoff = (cache.backoff * 2).clamp(1, 64);
             cache.skip = cache.backoff;
@@ -962,26 +1045,33 @@ fn hit_fn<'a>(
     }
 }
 
-/// Runs the query on the old front (a cut of the traversal tree) and builds the new one:
-/// separated pairs whose margin still exceeds the motion since their test are kept untested;
-/// the others are traversed afresh from where they are. In first-contact mode the leaf pairs
-/// whose boxes overlapped last time go first, and after a hit the entries not reached are
-/// kept as they are. Every leaf pair is covered exactly once whatever `old` holds, so the
-/// answer never depends on the cache. Returns `false` (the walk abandoned, its results
-/// incomplete) as soon as the walk's work exceeds `budget`.
 /// Extra work charged per descent a front walk starts, on top of its counters: a descent from a
 /// single pair pays a full f64 box test and placement, and a fresh wide traversal decides four
 /// pairs per test, so the walk's counters alone undercount its time next to a fresh traversal.
-const WALK_DESCENT_WORK: u64 = 2;
+/// Three (it was two with the looser motion bound): with two, fronts on the near-contact knots
+/// saved about 4 % of the work and cost 10 % more time (first contact, cached 1.10-1.13×; 1.06
+/// with three); with four, the touching all-pairs front of `coherent_front_does_less_work` at
+/// leaf 1, which saves 3× the work, was dropped.
+const WALK_DESCENT_WORK: u64 = 3;
 
-/// Walks the front (see [`collide_cached`]): returns whether it finished within `budget`, and
-/// how many descents it started.
+/// Walks the front (see [`collide_cached`]) in place: returns whether it finished within
+/// `budget`, and how many descents it started. Separated pairs whose margin still exceeds the
+/// motion since their test are kept untested; the others are traversed afresh from where they
+/// are. Every leaf pair is covered exactly once whatever the front holds, so the answer never
+/// depends on the cache; an abandoned walk's results are incomplete (the caller starts again
+/// from the root).
+///
+/// A separated entry whose bound still holds is only read, never moved, so a query on a
+/// coherent front costs one comparison per valid entry. An entry that is traversed again is
+/// replaced by the first entry its descent records, the others appended after the walked part
+/// (`scratch` holds them meanwhile); appended entries are fresh and not walked again in this
+/// query. On a hit (first contact) the descent's untested pairs are recorded the same way and
+/// every entry not reached stays as it is, so the front remains a cut.
 fn walk_front(
     ctx: &mut Ctx<'_>,
-    old: &[FrontEntry],
-    new: &mut Vec<FrontEntry>,
+    front: &mut Vec<FrontEntry>,
+    scratch: &mut Vec<FrontEntry>,
     clock: f64,
-    first: bool,
     budget: u64,
     hit: &mut impl FnMut(u32, u32) -> bool,
 ) -> (bool, u64) {
@@ -989,38 +1079,31 @@ fn walk_front(
     let mut descents = 0u64;
     let mut stack = Stack::new();
     let limit = clock + ctx.slack;
-    let passes: &[Option<u8>] = if first {
-        &[Some(OVERLAP), None]
-    } else {
-        &[None]
-    };
-    for (p, &pass) in passes.iter().enumerate() {
-        for (k, e) in old.iter().enumerate() {
-            // Pass 0 of first contact: overlapping leaf pairs only; the last pass: the rest.
-            match pass {
-                Some(kind) if e.kind != kind => continue,
-                None if first && e.kind == OVERLAP => continue,
-                _ => {}
-            }
-            if e.kind == SEPARATED && limit < e.bound {
-                new.push(*e);
+    let walked = front.len();
+    // One pass in either mode, in front order: a touching first-contact query is mostly
+    // decided by the witness before the walk, and a disjoint one re-tests every expired entry
+    // anyway (two passes, overlapping leaf pairs first, cost more than they found early).
+    {
+        for k in 0..walked {
+            let e = front[k];
+            // Non-separated entries carry a bound of -∞: always traversed again.
+            if limit < e.bound {
                 continue;
             }
             if ctx.counters.work() - start + WALK_DESCENT_WORK * descents > budget {
                 return (false, descents);
             }
             descents += 1;
-            if ctx.descend(e.a, e.b, &mut stack, Some((new, clock)), hit) {
-                // First contact found: keep every entry not reached yet.
-                let rest = old.iter().enumerate().filter(|&(k2, e2)| {
-                    let overlap = e2.kind == OVERLAP;
-                    if p == 0 && first {
-                        k2 > k || !overlap
-                    } else {
-                        k2 > k && !(first && overlap)
-                    }
-                });
-                new.extend(rest.map(|(_, e2)| *e2));
+            scratch.clear();
+            let stop = ctx.descend(e.a, e.b, &mut stack, Some((scratch, clock)), hit);
+            // A descent records at least its start pair's outcome (separated, a leaf pair, or
+            // untested after a hit), so the slot is always refilled.
+            debug_assert!(!scratch.is_empty());
+            if let Some((&head, tail)) = scratch.split_first() {
+                front[k] = head;
+                front.extend_from_slice(tail);
+            }
+            if stop {
                 return (true, descents);
             }
         }
@@ -1136,5 +1219,182 @@ mod huge_tests {
             Method::Exact,
         );
         assert!(ctx.sat32.is_some());
+    }
+}
+
+/// The coherence cache's motion bound: never below the true motion, tighter than Frobenius.
+#[cfg(test)]
+mod motion_tests {
+    use super::*;
+    use crate::tree::BuildOptions;
+    use frcd_geom::{DQuat, shapes};
+    use rand::{Rng, SeedableRng};
+
+    /// `√(vᵀGv)` for the unit vector power iteration converges to: never above `‖D‖₂`
+    /// (computed on `D` scaled by a power of two near 1, then scaled back).
+    fn norm_from_below(d: DMat3) -> f64 {
+        let m = d
+            .x_axis
+            .abs()
+            .max(d.y_axis.abs())
+            .max(d.z_axis.abs())
+            .max_element();
+        if m == 0.0 {
+            return 0.0;
+        }
+        let k = 2f64.powi(-(m.log2().floor() as i32));
+        let (d, back) = if k.is_finite() && k > 0.0 {
+            (d * k, 1.0 / k)
+        } else {
+            (d, 1.0)
+        };
+        let g = d.transpose() * d;
+        let mut best: f64 = 0.0;
+        for start in [DVec3::X, DVec3::Y, DVec3::Z, DVec3::ONE] {
+            let mut v = start;
+            for _ in 0..200 {
+                let w = g * v;
+                if w.length_squared() == 0.0 {
+                    break;
+                }
+                v = w.normalize();
+            }
+            best = best.max(v.dot(g * v));
+        }
+        best.sqrt() * back
+    }
+
+    #[test]
+    fn spectral_bound_holds_and_beats_frobenius_on_rotations() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(21);
+        let mut q = || {
+            DQuat::from_xyzw(
+                rng.random::<f64>() - 0.5,
+                rng.random::<f64>() - 0.5,
+                rng.random::<f64>() - 0.5,
+                rng.random::<f64>() - 0.5,
+            )
+            .normalize()
+        };
+        let mut cases = Vec::new();
+        for k in 0..2000 {
+            let q0 = q();
+            // Rotation differences from 1e-9 rad to a half turn.
+            let angle = 10f64.powf(-9.0 + 9.5 * (k as f64 / 2000.0));
+            let axis = q().xyz().normalize();
+            let q1 = DQuat::from_axis_angle(axis, angle) * q0;
+            cases.push((DMat3::from_quat(q1) - DMat3::from_quat(q0), true));
+            // General matrices at many scales, some of rank one.
+            let s = 10f64.powi((k % 40) * 10 - 200);
+            let r = DMat3::from_quat(q()) * s * (k as f64 + 1.0);
+            let r = if k % 3 == 0 {
+                DMat3::from_cols(r.x_axis, r.x_axis * 0.5, r.x_axis * -2.0)
+            } else {
+                r
+            };
+            cases.push((r, false));
+        }
+        for (d, rotation) in cases {
+            let bound = spectral_norm_bound(d);
+            let norm = norm_from_below(d);
+            assert!(norm.is_finite() && norm > 0.0, "{d:?}");
+            assert!(
+                bound >= norm * (1.0 - 1e-14),
+                "{d:?}: {bound} against {norm}"
+            );
+            if rotation {
+                let fro = (d.x_axis.length_squared()
+                    + d.y_axis.length_squared()
+                    + d.z_axis.length_squared())
+                .sqrt();
+                // Samuelson on the eigenvalues {0, a, a}: √(4a/3) against √(2a).
+                assert!(bound < 0.83 * fro, "{bound} against Frobenius {fro}");
+            }
+        }
+    }
+
+    #[test]
+    fn rotation_change_bound_holds_and_is_near_exact() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(23);
+        let mut unit = || {
+            DQuat::from_xyzw(
+                rng.random::<f64>() - 0.5,
+                rng.random::<f64>() - 0.5,
+                rng.random::<f64>() - 0.5,
+                rng.random::<f64>() - 0.5,
+            )
+            .normalize()
+        };
+        let mut exact_like = 0;
+        for k in 0..4000 {
+            let q0 = unit();
+            let angle = 10f64.powf(-9.0 + 9.5 * ((k / 2) as f64 / 2000.0));
+            let q1 = DQuat::from_axis_angle(unit().xyz().normalize(), angle) * q0;
+            let (m0, m1) = if k % 2 == 0 {
+                (DMat3::from_quat(q0), DMat3::from_quat(q1))
+            } else {
+                // Relative frames as queries compute them, from poses at large offsets.
+                let a = Pose::new(DVec3::new(3.0, -1.0, 2.0), unit());
+                let f0 = RelativeFrame::new(&a, &Pose::new(DVec3::X, q0));
+                let f1 = RelativeFrame::new(&a, &Pose::new(DVec3::X, q1));
+                (f0.m, f1.m)
+            };
+            let bound = rotation_change_bound(&m0, &m1);
+            let norm = norm_from_below(m1 - m0);
+            assert!(bound >= norm * (1.0 - 1e-14), "{k}: {bound} against {norm}");
+            let exact = 2.0 * (angle / 2.0).sin();
+            if angle > 1e-6 && angle < 1.5 {
+                assert!(
+                    bound <= exact * 1.001 + 1e-7,
+                    "{k}: {bound} against {exact}"
+                );
+                exact_like += 1;
+            }
+            assert!(bound <= spectral_norm_bound(m1 - m0), "{k}");
+        }
+        assert!(exact_like > 1000, "{exact_like}");
+        // Matrices far from rotations take the general bound, which still holds.
+        let m0 = DMat3::from_cols(DVec3::new(2.0, 0.1, 0.0), DVec3::Y, DVec3::Z);
+        let m1 = DMat3::IDENTITY * 0.5;
+        assert!(rotation_change_bound(&m0, &m1) >= norm_from_below(m1 - m0) * (1.0 - 1e-14));
+    }
+
+    #[test]
+    fn the_motion_clock_bounds_every_vertex_move() {
+        let mesh = shapes::torus_knot(&shapes::TorusKnotParams::default()).unwrap();
+        let mesh = mesh.transformed(&Pose::from_translation(DVec3::new(0.3, -0.2, 0.1)));
+        let tree = ObbTree::build(&mesh, &BuildOptions::default());
+        let verts = mesh.vertices();
+        let mut rng = rand::rngs::StdRng::seed_from_u64(22);
+        let mut cache = PairCache::new();
+        let mut prev: Option<RelativeFrame> = None;
+        for k in 0..300 {
+            let small = 10f64.powf(-8.0 + 8.0 * rng.random::<f64>());
+            let pose_b = Pose::new(
+                DVec3::new(rng.random(), rng.random(), rng.random()) * small,
+                DQuat::from_rotation_z(small * k as f64) * DQuat::from_rotation_x(0.3 * small),
+            );
+            let frame = RelativeFrame::new(&Pose::IDENTITY, &pose_b);
+            cache.bind(&tree, &tree, &frame);
+            if let Some(p) = prev {
+                let moved = verts
+                    .iter()
+                    .map(|v| (frame.point(*v) - p.point(*v)).length())
+                    .fold(0.0f64, f64::max);
+                assert!(
+                    cache.delta >= moved,
+                    "step {k}: bound {} below {moved}",
+                    cache.delta
+                );
+                assert!(
+                    cache.delta <= 4.0 * moved + 1e-15,
+                    "step {k}: bound {} far above {moved}",
+                    cache.delta
+                );
+            }
+            prev = Some(frame);
+        }
+        assert!(tree.vertex_radius <= tree.radius_from_origin);
+        assert!(verts.iter().all(|v| v.length() <= tree.vertex_radius));
     }
 }

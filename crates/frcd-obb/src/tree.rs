@@ -85,6 +85,10 @@ pub struct ObbTree {
     pub(crate) aabb: Aabb,
     /// Largest |coordinate| norm of the mesh (local frame), for error bounds.
     pub(crate) radius_from_origin: f64,
+    /// An upper bound on every vertex's distance from the local origin (tighter than
+    /// `radius_from_origin`, the box corner's): how far a rotation can move the geometry,
+    /// for the coherence cache's motion bound.
+    pub(crate) vertex_radius: f64,
     /// One vertex per connected component (for the point-in-mesh parity tests).
     pub(crate) component_points: Vec<DVec3>,
     /// Identity of this build (clones share it: same structure), for caches.
@@ -150,6 +154,7 @@ impl ObbTree {
         let sphere = Sphere::from_points(points);
         let aabb = mesh.aabb();
         let radius_from_origin = aabb.min.abs().max(aabb.max.abs()).length();
+        let vertex_radius = points.iter().fold(0.0f64, |r, p| r.max(norm_bound(*p)));
         ObbTree {
             quads: std::sync::OnceLock::new(),
             quad_layer: true,
@@ -159,6 +164,7 @@ impl ObbTree {
             sphere,
             aabb,
             radius_from_origin,
+            vertex_radius,
             component_points: component_points(&mesh),
             closed: mesh.topology().is_closed(),
             uid: NEXT_UID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
@@ -359,6 +365,18 @@ impl ObbTree {
 }
 
 /// One vertex per connected component (triangles connected through shared vertex indices).
+/// An upper bound on `|p|`: the computed length rounded up (three squares, two sums and a
+/// square root, each within half an ulp: under 3ε in all), or, where squares could underflow or
+/// overflow, `√3 · max |p_k|` rounded up.
+fn norm_bound(p: DVec3) -> f64 {
+    let m = p.abs().max_element();
+    if (1e-150..=1e150).contains(&m) {
+        p.length() * (1.0 + 1e-15)
+    } else {
+        m * (1.732_050_807_568_877_3 * (1.0 + 1e-15))
+    }
+}
+
 fn component_points(mesh: &TriMesh) -> Vec<DVec3> {
     let n = mesh.vertex_count();
     let mut parent: Vec<u32> = (0..n as u32).collect();
