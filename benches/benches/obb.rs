@@ -30,6 +30,9 @@
 //! - `knots_slow` (class 4): the knots turning slowly and steadily (coherent), 200 steps;
 //! - `sparse/*` (class 5): every body pair of 1,000 sparse bodies, and a `World` over 10,000.
 
+#[path = "common/cad.rs"]
+mod cad;
+
 use criterion::{Criterion, criterion_group, criterion_main};
 use frcd_benches::scenes::{self, Scene};
 use frcd_obb::{
@@ -407,54 +410,6 @@ fn pair_group(c: &mut Criterion, group: &str, p: &Pair) {
     g.finish();
 }
 
-/// The real-mesh scenes (class 3), or nothing (SKIP printed) when `../shared/meshes` is absent.
-fn cad_scenes() -> Vec<Scene> {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/meshes");
-    let load = |f: &str| frcd_io::load_mesh(dir.join(f)).ok().map(Arc::new);
-    let pairs = [
-        (
-            "cad_wagon_bogie",
-            "railway_3dprintedtrains/intermodal_wagon_no_visible_container_holes_binary.stl",
-            "railway_3dprintedtrains/bogie.stl",
-        ),
-        (
-            "cad_bogie_pair",
-            "railway_3dprintedtrains/bogie.stl",
-            "railway_3dprintedtrains/bogie.stl",
-        ),
-        (
-            "cad_fandisk_pair",
-            "mechanical_trimesh/fandisk.obj",
-            "mechanical_trimesh/fandisk.obj",
-        ),
-    ];
-    let mut out = Vec::new();
-    for (k, (name, fa, fb)) in pairs.into_iter().enumerate() {
-        let (Some(a), Some(b)) = (load(fa), load(fb)) else {
-            eprintln!(
-                "SKIP {name}: {fa} or {fb} not found under {}",
-                dir.display()
-            );
-            continue;
-        };
-        let (ta, tb) = (
-            ObbTree::build(&a, &BuildOptions::default()),
-            ObbTree::build(&b, &BuildOptions::default()),
-        );
-        let r = req(Mode::FirstContact);
-        out.push(scenes::random_near_contact(
-            name,
-            a,
-            b,
-            100,
-            0.01,
-            0xCAD0 + k as u64,
-            |pb| collide(&ta, &frcd_geom::Pose::IDENTITY, &tb, pb, &r).collide,
-        ));
-    }
-    out
-}
-
 fn bench_build(c: &mut Criterion) {
     let mut g = c.benchmark_group("obb/build");
     g.sample_size(10);
@@ -503,7 +458,7 @@ fn bench_pairs(c: &mut Criterion) {
         list.push((scenes::knots_near_contact(500), 10));
     }
     if want("cad") {
-        list.extend(cad_scenes().into_iter().map(|s| (s, 2)));
+        list.extend(cad::cad_scenes().into_iter().map(|s| (s, 2)));
     }
     if want("knots_slow") {
         list.push((scenes::knots_slow_rotation(200), 10));
