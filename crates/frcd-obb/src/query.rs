@@ -1230,6 +1230,11 @@ mod motion_tests {
     use frcd_geom::{DQuat, shapes};
     use rand::{Rng, SeedableRng};
 
+    fn random_rotation(rng: &mut rand::rngs::StdRng) -> DQuat {
+        let mut c = || rng.random::<f64>() - 0.5;
+        DQuat::from_xyzw(c(), c(), c(), c()).normalize()
+    }
+
     /// `√(vᵀGv)` for the unit vector power iteration converges to: never above `‖D‖₂`
     /// (computed on `D` scaled by a power of two near 1, then scaled back).
     fn norm_from_below(d: DMat3) -> f64 {
@@ -1267,15 +1272,7 @@ mod motion_tests {
     #[test]
     fn spectral_bound_holds_and_beats_frobenius_on_rotations() {
         let mut rng = rand::rngs::StdRng::seed_from_u64(21);
-        let mut q = || {
-            DQuat::from_xyzw(
-                rng.random::<f64>() - 0.5,
-                rng.random::<f64>() - 0.5,
-                rng.random::<f64>() - 0.5,
-                rng.random::<f64>() - 0.5,
-            )
-            .normalize()
-        };
+        let mut q = || random_rotation(&mut rng);
         let mut cases = Vec::new();
         for k in 0..2000 {
             let q0 = q();
@@ -1316,15 +1313,7 @@ mod motion_tests {
     #[test]
     fn rotation_change_bound_holds_and_is_near_exact() {
         let mut rng = rand::rngs::StdRng::seed_from_u64(23);
-        let mut unit = || {
-            DQuat::from_xyzw(
-                rng.random::<f64>() - 0.5,
-                rng.random::<f64>() - 0.5,
-                rng.random::<f64>() - 0.5,
-                rng.random::<f64>() - 0.5,
-            )
-            .normalize()
-        };
+        let mut unit = || random_rotation(&mut rng);
         let mut exact_like = 0;
         for k in 0..4000 {
             let q0 = unit();

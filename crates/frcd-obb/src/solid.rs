@@ -126,29 +126,62 @@ pub(crate) fn point_inside(
     bounds: &Aabb,
     seed: u64,
 ) -> Option<bool> {
+    parity(p, bounds, seed, |q, seg| {
+        let mut crossings = Crossings::default();
+        for i in 0..n {
+            if !crossings.add(p, q, seg, &tri(i)) {
+                return None;
+            }
+        }
+        Some(crossings.0)
+    })
+}
+
+/// The ray loop of the parity tests: for each direction in turn, the segment from `p` to a
+/// point beyond `bounds`, until `count(q, segment box)` gives a crossing count (`None`: a
+/// degenerate hit, try the next direction).
+fn parity(
+    p: DVec3,
+    bounds: &Aabb,
+    seed: u64,
+    mut count: impl FnMut(DVec3, &Aabb) -> Option<u32>,
+) -> Option<bool> {
     if !bounds.contains_point(p) {
         return Some(false);
     }
-    'rays: for k in 0..MAX_RAYS {
+    for k in 0..MAX_RAYS {
         let Some(q) = ray_end(p, direction(seed, k), bounds) else {
-            continue 'rays;
+            continue;
         };
         let seg = Aabb::new(p.min(q), p.max(q));
-        let mut crossings = 0u32;
-        for i in 0..n {
-            let t = tri(i);
-            if !seg.intersects(&t.aabb()) {
-                continue;
-            }
-            match ray_hit(p, q, &t) {
-                Hit::Miss => {}
-                Hit::Cross => crossings += 1,
-                Hit::Degenerate => continue 'rays,
-            }
+        if let Some(crossings) = count(q, &seg) {
+            return Some(crossings % 2 == 1);
         }
-        return Some(crossings % 2 == 1);
     }
     None
+}
+
+/// A running crossing count of one parity segment.
+#[derive(Default)]
+struct Crossings(u32);
+
+impl Crossings {
+    /// Counts `t` (skipped when its box misses the segment's box `seg`); `false` on a
+    /// degenerate hit (the segment must be abandoned).
+    #[inline]
+    fn add(&mut self, p: DVec3, q: DVec3, seg: &Aabb, t: &Triangle) -> bool {
+        if !seg.intersects(&t.aabb()) {
+            return true;
+        }
+        match ray_hit(p, q, t) {
+            Hit::Miss => true,
+            Hit::Cross => {
+                self.0 += 1;
+                true
+            }
+            Hit::Degenerate => false,
+        }
+    }
 }
 
 /// [`point_inside`] against a closed tree's mesh, visiting only the leaves whose box meets the
@@ -183,9 +216,6 @@ pub(crate) fn point_inside_tree(
             }
         }
     };
-    if !bounds.contains_point(p) {
-        return Some(false);
-    }
     let node_box = |n: &TNode| {
         let local = local_box(n);
         match map {
@@ -201,12 +231,8 @@ pub(crate) fn point_inside_tree(
         }
     };
     let mut stack: Vec<u32> = Vec::with_capacity(64);
-    'rays: for k in 0..MAX_RAYS {
-        let Some(q) = ray_end(p, direction(seed, k), &bounds) else {
-            continue 'rays;
-        };
-        let seg = Aabb::new(p.min(q), p.max(q));
-        let mut crossings = 0u32;
+    parity(p, &bounds, seed, |q, seg| {
+        let mut crossings = Crossings::default();
         stack.clear();
         stack.push(0);
         while let Some(i) = stack.pop() {
@@ -222,20 +248,13 @@ pub(crate) fn point_inside_tree(
                 continue;
             }
             for &ti in tree.node_triangles(i) {
-                let t = triangle(ti);
-                if !seg.intersects(&t.aabb()) {
-                    continue;
-                }
-                match ray_hit(p, q, &t) {
-                    Hit::Miss => {}
-                    Hit::Cross => crossings += 1,
-                    Hit::Degenerate => continue 'rays,
+                if !crossings.add(p, q, seg, &triangle(ti)) {
+                    return None;
                 }
             }
         }
-        return Some(crossings % 2 == 1);
-    }
-    None
+        Some(crossings.0)
+    })
 }
 
 /// The axis-aligned box of a traversal node's f32 box `{c + U s : |s_k| ≤ h_k}` in the mesh's
