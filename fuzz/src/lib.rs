@@ -10,7 +10,9 @@
 //! places have: frcd-geom (feature `shapes`), frcd-obb, frcd-io, serde_json.
 
 use frcd_geom::{DQuat, DVec3, Pose, TriMesh, shapes};
-use frcd_obb::{BuildOptions, FitMethod, Mode, ObbTree, Request, collide, oracle};
+use frcd_obb::{
+    BuildOptions, FitMethod, Mode, ObbTree, PairCache, Request, collide, collide_cached, oracle,
+};
 use std::path::Path;
 
 /// A target's body: the fuzzer's bytes in, a panic only on a broken invariant.
@@ -204,7 +206,8 @@ fn small_pose(b: &mut Bytes, scale: f64) -> Pose {
 /// Differential: `collide` (all pairs, solid or surface mode) against `frcd_obb::oracle` on
 /// small meshes and poses. Coordinates are small integers scaled by a power of two (so touching,
 /// coplanar and degenerate configurations are common), sometimes closed boxes (containment).
-/// The two answers must be equal.
+/// The two answers must be equal, and `collide_cached` over a short sequence of poses must
+/// answer as `collide` does.
 pub fn collide_oracle(data: &[u8]) {
     let mut b = Bytes(data);
     let flags = b.byte();
@@ -243,4 +246,33 @@ pub fn collide_oracle(data: &[u8]) {
         },
     );
     assert_eq!(first.collide, want.collide());
+    // The coherence cache over a short sequence (B turning by a milliradian a step, then a jump
+    // to a second pose and back): every answer equals the uncached query's.
+    let jump = small_pose(&mut b, scale);
+    let mut caches = [PairCache::new(), PairCache::new()];
+    for step in 0..7u32 {
+        let pose = if step == 4 {
+            jump
+        } else {
+            Pose::new(
+                pb.translation,
+                DQuat::from_rotation_z(1e-3 * step as f64) * pb.rotation,
+            )
+        };
+        for (cache, mode) in caches.iter_mut().zip([Mode::AllPairs, Mode::FirstContact]) {
+            let r = Request { mode, ..request };
+            let plain = collide(&ta, &pa, &tb, &pose, &r);
+            let cached = collide_cached(&ta, &pa, &tb, &pose, &r, cache);
+            assert_eq!(
+                cached.collide, plain.collide,
+                "cached answer differs, step {step}"
+            );
+            if mode == Mode::AllPairs {
+                assert_eq!(
+                    cached.pairs, plain.pairs,
+                    "cached pairs differ, step {step}"
+                );
+            }
+        }
+    }
 }
