@@ -266,8 +266,8 @@ fn split_a(na: &TNode, nb: &TNode) -> bool {
 /// overlapped get a box test before their triangle tests.
 ///
 /// The cache never costs much: a work budget compares each front walk with the last fresh
-/// traversal ([`Counters::work`]); when the front costs more, the cache drops it and traverses
-/// afresh, backing off exponentially (up to 64 queries) before trying a front again, so
+/// traversal ([`Counters::work`]); when the front saves less than a quarter of that work, the
+/// cache drops it and traverses afresh, backing off exponentially (up to 64 queries) before trying a front again, so
 /// incoherent sequences (random poses, teleports) run at the uncached speed. The answers are
 /// the same as without a cache; only the work differs. A cache used with other trees resets
 /// itself.
