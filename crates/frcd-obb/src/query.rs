@@ -6,7 +6,7 @@ use crate::nodes::TNode;
 use crate::sat::{self, Placed, SLACK_REL};
 use crate::solid::point_inside_tree;
 use crate::tree::ObbTree;
-use crate::wide::{self, ALanes, NO_QUAD, Placed32, Sat32, quad_ids};
+use crate::wide::{self, ALanes, BLanes, NO_QUAD, Sat32, quad_ids};
 use frcd_geom::{Aabb, DMat3, DVec3, Pose, Triangle};
 use frcd_tritri::{Contact, Method};
 
@@ -420,12 +420,13 @@ fn scaled_spectral_bound(d: DMat3) -> f64 {
 }
 
 /// The traversal stack: node pairs, each naming its B box (placed in A's frame) in `placed`
-/// (f64 boxes for the f64 traversal) or `placed32` (the wide f32 traversal).
+/// (f64 boxes for the f64 traversal) or in `placed32` (the wide f32 traversal: the lanes one
+/// step placed, kept whole, named `4 · block + lane`).
 #[derive(Default)]
 struct Stack {
     pairs: Vec<(u32, u32, u32)>,
     placed: Vec<Placed>,
-    placed32: Vec<Placed32>,
+    placed32: Vec<BLanes>,
 }
 
 impl Stack {
@@ -683,11 +684,13 @@ impl<'a> Ctx<'a> {
         let (qa_all, qb_all) = (a.quads(), b.quads());
         // Placed boxes are named by index, as in `descend64`: indices never decrease up the
         // stack, so when an entry is popped every box above its own is finished with.
-        stack.placed32.push(pj);
-        stack.pairs.push((i, j, pbase as u32));
+        // A B box is named `4 · block + lane`: the blocks are the lanes of one step, stored
+        // whole (one store per step instead of taking each surviving lane apart).
+        stack.placed32.push(pj.splat());
+        stack.pairs.push((i, j, (pbase as u32) << 2));
         while stack.pairs.len() > base {
             let (i, j, p) = stack.pairs.pop().expect("non-empty");
-            stack.placed32.truncate(p as usize + 1);
+            stack.placed32.truncate((p >> 2) as usize + 1);
             let na = &a.nodes[i as usize];
             let nb = &b.nodes[j as usize];
             if na.is_leaf() && nb.is_leaf() {
@@ -711,7 +714,7 @@ impl<'a> Ctx<'a> {
                     (ids, n, ALanes::gather(&a.nodes, &ids, n))
                 };
                 self.counters.box_tests += n as u64;
-                let pb = stack.placed32[p as usize].splat();
+                let pb = stack.placed32[(p >> 2) as usize].broadcast((p & 3) as usize);
                 let m = wide::separation4(&lanes, &pb, s, (1 << n) - 1);
                 if front.is_none() {
                     // Branch-free: every lane written, the overlapping ones kept. Pushed last
@@ -745,29 +748,25 @@ impl<'a> Ctx<'a> {
                 self.counters.box_tests += n as u64;
                 self.counters.placements += n as u64;
                 let m = wide::separation4(&ALanes::splat(na), &lanes, s, (1 << n) - 1);
+                let block = (stack.placed32.len() as u32) << 2;
+                stack.placed32.push(lanes);
                 if front.is_none() {
-                    // Branch-free, as above; placed boxes stay in step with the pairs.
+                    // Branch-free, as above; the lanes stay in their block.
                     let top = stack.pairs.len();
-                    let q0 = stack.placed32.len();
                     stack.pairs.resize(top + 4, (0, 0, 0));
-                    stack.placed32.resize(q0 + 4, lanes.lane(0));
-                    let mut len = 0;
+                    let mut len = top;
                     for k in (0..n).rev() {
-                        stack.placed32[q0 + len] = lanes.lane(k);
-                        stack.pairs[top + len] = (i, ids[k], (q0 + len) as u32);
+                        stack.pairs[len] = (i, ids[k], block | k as u32);
                         len += 1 - (m.0[k] > 0.0) as usize;
                     }
-                    stack.pairs.truncate(top + len);
-                    stack.placed32.truncate(q0 + len);
+                    stack.pairs.truncate(len);
                     continue;
                 }
                 for k in (0..n).rev() {
                     if m.0[k] > 0.0 {
                         record_separated(&mut front, i, ids[k], wide::margin64(m.0[k]));
                     } else {
-                        let q = stack.placed32.len() as u32;
-                        stack.placed32.push(lanes.lane(k));
-                        stack.pairs.push((i, ids[k], q));
+                        stack.pairs.push((i, ids[k], block | k as u32));
                     }
                 }
             }

@@ -388,8 +388,22 @@ pub(crate) struct BLanes {
 }
 
 impl BLanes {
-    /// Lane `k` as one placed box.
+    /// Lane `k` in every lane (the same values as `self.lane(k).splat()`).
     #[inline(always)]
+    pub fn broadcast(&self, k: usize) -> BLanes {
+        let mut out = BLanes::default();
+        for j in 0..3 {
+            for x in 0..3 {
+                out.p[j][x] = F4::splat(self.p[j][x].0[k]);
+            }
+            out.h[j] = F4::splat(self.h[j].0[k]);
+            out.c[j] = D4([self.c[j].0[k]; 4]);
+        }
+        out
+    }
+
+    /// Lane `k` as one placed box.
+    #[cfg(test)]
     pub fn lane(&self, k: usize) -> Placed32 {
         let mut p = [[0.0f32; 3]; 3];
         for j in 0..3 {
