@@ -268,6 +268,44 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 /// Per-step times (best of four runs of the sequence) of frcd, frcd cached and parry3d-f64;
 /// prints disjoint and touching medians, totals, ratios and frcd's work per query.
+/// FRCD_BENCH_PROFILE=SECONDS: runs the plain first-contact queries of the disjoint steps
+/// (FRCD_BENCH_PROFILE_MODE=all: all pairs) in a loop for that long, for a sampling profiler,
+/// instead of the class's checks and benchmarks. True when it ran.
+fn profile_loop(p: &Pair) -> bool {
+    let Some(secs) = std::env::var("FRCD_BENCH_PROFILE")
+        .ok()
+        .and_then(|v| v.parse::<f64>().ok())
+    else {
+        return false;
+    };
+    let mode = match std::env::var("FRCD_BENCH_PROFILE_MODE").as_deref() {
+        Ok("all") => Mode::AllPairs,
+        _ => Mode::FirstContact,
+    };
+    let (ta, tb) = (&p.frcd[0], &p.frcd[1]);
+    let r = req(mode);
+    let steps: Vec<_> = p
+        .scene
+        .frames
+        .iter()
+        .filter(|f| !collide(ta, &f[0], tb, &f[1], &r).collide)
+        .collect();
+    let start = Instant::now();
+    let mut queries = 0u64;
+    while start.elapsed().as_secs_f64() < secs {
+        for f in &steps {
+            black_box(collide(ta, &f[0], tb, &f[1], &r));
+        }
+        queries += steps.len() as u64;
+    }
+    eprintln!(
+        "[profile] {}: {queries} disjoint queries, {:.2} us each",
+        p.scene.name,
+        start.elapsed().as_secs_f64() * 1e6 / queries as f64
+    );
+    true
+}
+
 fn split(p: &Pair) {
     let (ta, tb) = (&p.frcd[0], &p.frcd[1]);
     let n = p.scene.steps();
@@ -466,6 +504,9 @@ fn bench_pairs(c: &mut Criterion) {
     for (scene, stride) in list {
         let name = scene.name.clone();
         let p = prepare(scene, &opts);
+        if profile_loop(&p) {
+            continue;
+        }
         if bench_method() == frcd_obb::Method::Exact {
             agreement(&p, stride);
         } else {
