@@ -266,8 +266,6 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// Per-step times (best of four runs of the sequence) of frcd, frcd cached and parry3d-f64;
-/// prints disjoint and touching medians, totals, ratios and frcd's work per query.
 /// FRCD_BENCH_PROFILE=SECONDS: runs the plain first-contact queries of the disjoint steps
 /// (FRCD_BENCH_PROFILE_MODE=all: all pairs) in a loop for that long, for a sampling profiler,
 /// instead of the class's checks and benchmarks. True when it ran.
@@ -278,6 +276,10 @@ fn profile_loop(p: &Pair) -> bool {
     else {
         return false;
     };
+    if !(secs.is_finite() && secs > 0.0) {
+        eprintln!("[profile] FRCD_BENCH_PROFILE={secs}: want a positive number of seconds");
+        return true;
+    }
     let mode = match std::env::var("FRCD_BENCH_PROFILE_MODE").as_deref() {
         Ok("all") => Mode::AllPairs,
         _ => Mode::FirstContact,
@@ -290,6 +292,10 @@ fn profile_loop(p: &Pair) -> bool {
         .iter()
         .filter(|f| !collide(ta, &f[0], tb, &f[1], &r).collide)
         .collect();
+    if steps.is_empty() {
+        eprintln!("[profile] {}: no disjoint steps to profile", p.scene.name);
+        return true;
+    }
     let start = Instant::now();
     let mut queries = 0u64;
     while start.elapsed().as_secs_f64() < secs {
@@ -306,6 +312,8 @@ fn profile_loop(p: &Pair) -> bool {
     true
 }
 
+/// Per-step times (best of four runs of the sequence) of frcd, frcd cached and parry3d-f64;
+/// prints disjoint and touching medians, totals, ratios and frcd's work per query.
 fn split(p: &Pair) {
     let (ta, tb) = (&p.frcd[0], &p.frcd[1]);
     let n = p.scene.steps();

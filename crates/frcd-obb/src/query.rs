@@ -682,10 +682,10 @@ impl<'a> Ctx<'a> {
             return false;
         }
         let (qa_all, qb_all) = (a.quads(), b.quads());
-        // Placed boxes are named by index, as in `descend64`: indices never decrease up the
-        // stack, so when an entry is popped every box above its own is finished with.
-        // A B box is named `4 · block + lane`: the blocks are the lanes of one step, stored
-        // whole (one store per step instead of taking each surviving lane apart).
+        // A B box is named `4 · block + lane`, a block being the lanes one step placed, stored
+        // whole (one store per step instead of taking each surviving lane apart). As in
+        // `descend64`, blocks never decrease up the stack, so when an entry is popped every
+        // block above its own is finished with.
         stack.placed32.push(pj.splat());
         stack.pairs.push((i, j, (pbase as u32) << 2));
         while stack.pairs.len() > base {

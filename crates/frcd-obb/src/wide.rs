@@ -951,6 +951,12 @@ mod tests {
                 assert_eq!(x.0[..len], y.0[..len]);
                 for k in 0..len {
                     assert_eq!(pl.lane(k).c, pq.lane(k).c);
+                    // A lane broadcast from a block is that lane in every lane.
+                    let (one, all) = (pq.lane(k), pq.broadcast(k));
+                    for m in 0..4 {
+                        let got = all.lane(m);
+                        assert_eq!((got.p, got.h, got.c), (one.p, one.h, one.c));
+                    }
                 }
             }
             assert!(with > 10, "{with}");
