@@ -268,7 +268,9 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 /// FRCD_BENCH_PROFILE=SECONDS: runs the plain first-contact queries of the disjoint steps
 /// (FRCD_BENCH_PROFILE_MODE=all: all pairs) in a loop for that long, for a sampling profiler,
-/// instead of the class's checks and benchmarks. True when it ran.
+/// instead of the class's checks and benchmarks. FRCD_BENCH_PROFILE_MODE=cached (cached-all:
+/// all pairs) runs the whole sequence in order with a coherence cache instead, emptied at each
+/// repetition, as the split runs do. True when it ran.
 fn profile_loop(p: &Pair) -> bool {
     let Some(secs) = std::env::var("FRCD_BENCH_PROFILE")
         .ok()
@@ -280,12 +282,38 @@ fn profile_loop(p: &Pair) -> bool {
         eprintln!("[profile] FRCD_BENCH_PROFILE={secs}: want a positive number of seconds");
         return true;
     }
-    let mode = match std::env::var("FRCD_BENCH_PROFILE_MODE").as_deref() {
-        Ok("all") => Mode::AllPairs,
+    let which = std::env::var("FRCD_BENCH_PROFILE_MODE").unwrap_or_default();
+    let mode = match which.as_str() {
+        "all" | "cached-all" => Mode::AllPairs,
         _ => Mode::FirstContact,
     };
     let (ta, tb) = (&p.frcd[0], &p.frcd[1]);
     let r = req(mode);
+    if which.starts_with("cached") {
+        let start = Instant::now();
+        let (mut queries, mut entries) = (0u64, 0u64);
+        let mut work = frcd_obb::Counters::default();
+        while start.elapsed().as_secs_f64() < secs {
+            let mut cache = PairCache::new();
+            for f in &p.scene.frames {
+                work += black_box(collide_cached(ta, &f[0], tb, &f[1], &r, &mut cache)).counters;
+                entries += cache.front_len() as u64;
+            }
+            queries += p.scene.frames.len() as u64;
+        }
+        eprintln!(
+            "[profile] {}: {queries} cached queries (whole sequences), {:.2} us each, \
+             per query (mean): {} front entries after it, {} box tests, {} placements, \
+             {} triangle tests",
+            p.scene.name,
+            start.elapsed().as_secs_f64() * 1e6 / queries as f64,
+            entries / queries,
+            work.box_tests / queries,
+            work.placements / queries,
+            work.tri_tests / queries,
+        );
+        return true;
+    }
     let steps: Vec<_> = p
         .scene
         .frames

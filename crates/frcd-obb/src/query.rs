@@ -200,49 +200,100 @@ pub(crate) fn query_slack(a: &ObbTree, b: &ObbTree, frame: &RelativeFrame) -> f6
         + frcd_geom::ABSOLUTE_SLACK
 }
 
-/// One entry of a traversal front: a node pair where a traversal stopped (the entries of a
-/// front are a cut of the traversal tree: every leaf pair lies below exactly one of them).
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct FrontEntry {
-    a: u32,
-    b: u32,
-    /// [`SEPARATED`], [`OVERLAP`] (a leaf pair whose boxes overlapped) or [`UNTESTED`].
-    kind: u8,
+/// A traversal front: the node pairs where a traversal stopped (a cut of the traversal tree:
+/// every leaf pair lies below exactly one of them), with one bound per pair. Two parallel
+/// arrays rather than one of entries, so that the walk's scan for expired pairs (most of a
+/// coherent front's pairs are only read) compares eight bounds at a time.
+#[derive(Clone, Debug, Default)]
+struct Front {
+    /// Node pairs (A, B).
+    pairs: Vec<(u32, u32)>,
     /// For a separated pair: the pair stays separated while the cache's motion clock plus the
-    /// query's slack stays below this value (clock at the test + separation margin).
-    bound: f64,
+    /// query's slack stays below this value (clock at the test + separation margin). -∞ for
+    /// the others (a leaf pair whose boxes overlapped, a pair left untested after a hit):
+    /// always traversed again.
+    bounds: Vec<f64>,
 }
 
-const SEPARATED: u8 = 0;
-const OVERLAP: u8 = 1;
-const UNTESTED: u8 = 2;
+impl Front {
+    fn len(&self) -> usize {
+        self.pairs.len()
+    }
+
+    fn is_empty(&self) -> bool {
+        self.pairs.is_empty()
+    }
+
+    fn clear(&mut self) {
+        self.pairs.clear();
+        self.bounds.clear();
+    }
+
+    #[inline(always)]
+    fn push(&mut self, a: u32, b: u32, bound: f64) {
+        self.pairs.push((a, b));
+        self.bounds.push(bound);
+    }
+
+    /// The first index in `from..end` whose pair is not known separated at `limit` (the
+    /// clock plus the query's slack; a NaN bound counts as expired), or `end`.
+    #[inline]
+    fn next_expired(&self, from: usize, end: usize, limit: f64) -> usize {
+        let bounds = &self.bounds[..end];
+        let mut k = from;
+        // Eight at a time without a branch per pair (vectorised); the chunk that holds one is
+        // searched pair by pair.
+        while let Some(chunk) = bounds.get(k..k + 8) {
+            if chunk.iter().fold(false, |any, &x| any | expired(limit, x)) {
+                break;
+            }
+            k += 8;
+        }
+        while k < bounds.len() && !expired(limit, bounds[k]) {
+            k += 1;
+        }
+        k
+    }
+}
+
+impl Front {
+    /// How many pairs in `..end` are not known separated at `limit` (as in
+    /// [`Front::next_expired`]).
+    fn count_expired(&self, end: usize, limit: f64) -> usize {
+        self.bounds[..end]
+            .iter()
+            .map(|&x| expired(limit, x) as usize)
+            .sum()
+    }
+}
+
+/// Whether a front pair with this bound must be tested again at `limit`: it is not known
+/// separated (a NaN bound, which no finite input makes, would count as expired).
+#[inline(always)]
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
+fn expired(limit: f64, bound: f64) -> bool {
+    !(limit < bound)
+}
 
 /// The front a traversal records into, if any, with the cache's motion clock.
-type Recording<'f> = Option<(&'f mut Vec<FrontEntry>, f64)>;
+type Recording<'f> = Option<(&'f mut Front, f64)>;
 
 /// Records a separated pair (bound: clock + `margin`) when a front is being recorded.
 #[inline(always)]
 fn record_separated(front: &mut Recording<'_>, a: u32, b: u32, margin: f64) {
     if let Some((f, clock)) = front {
-        f.push(FrontEntry {
-            a,
-            b,
-            kind: SEPARATED,
-            bound: *clock + margin,
-        });
+        f.push(a, b, *clock + margin);
     }
 }
 
-/// Records a pair of another kind ([`OVERLAP`], [`UNTESTED`]) when a front is being recorded.
+/// Records pairs to be traversed again next time (overlapping leaf pairs, pairs left
+/// untested after a hit) when a front is being recorded.
 #[inline(always)]
-fn record_pairs(front: &mut Recording<'_>, kind: u8, pairs: impl Iterator<Item = (u32, u32)>) {
+fn record_pairs(front: &mut Recording<'_>, pairs: impl Iterator<Item = (u32, u32)>) {
     if let Some((f, _)) = front {
-        f.extend(pairs.map(|(a, b)| FrontEntry {
-            a,
-            b,
-            kind,
-            bound: f64::NEG_INFINITY,
-        }));
+        for (a, b) in pairs {
+            f.push(a, b, f64::NEG_INFINITY);
+        }
     }
 }
 
@@ -275,8 +326,8 @@ fn split_a(na: &TNode, nb: &TNode) -> bool {
 pub struct PairCache {
     key: (u64, u64),
     witness: Option<(u32, u32)>,
-    front: Vec<FrontEntry>,
-    scratch: Vec<FrontEntry>,
+    front: Front,
+    scratch: Front,
     /// Frame of the previous query.
     prev: Option<RelativeFrame>,
     /// Sum of the motion bounds since the cache was bound.
@@ -586,7 +637,7 @@ impl<'a> Ctx<'a> {
         hit: &mut impl FnMut(u32, u32) -> bool,
     ) -> bool {
         match self.sat32 {
-            Some(sat) => self.descend_wide(&sat, i, j, stack, front, hit),
+            Some(sat) => self.descend_wide(&sat, i, j, None, stack, front, hit),
             None => self.descend64(i, j, stack, front, hit),
         }
     }
@@ -617,10 +668,10 @@ impl<'a> Ctx<'a> {
                 continue;
             }
             if self.both_leaves(i, j) {
-                record_pairs(&mut front, OVERLAP, std::iter::once((i, j)));
+                record_pairs(&mut front, std::iter::once((i, j)));
                 if self.leaf_pair(i, j, hit) {
                     let rest = stack.pairs[base..].iter().map(|&(a, b, _)| (a, b));
-                    record_pairs(&mut front, UNTESTED, rest);
+                    record_pairs(&mut front, rest);
                     stack.pairs.truncate(base);
                     stack.placed.truncate(pbase);
                     return true;
@@ -652,11 +703,17 @@ impl<'a> Ctx<'a> {
     /// so a stack step decides up to four box pairs with one branch. Each lane counts as one
     /// box test, each B box placed in A's frame as one placement. Front entries are binary
     /// node pairs, as in the binary traversal, so a front is a cut of either traversal tree.
+    ///
+    /// `overlapping_start`: B's start node already placed in A's frame (in every lane) and
+    /// found overlapping A's (the front walk tests expired pairs four at a time), so neither
+    /// is done again.
+    #[allow(clippy::too_many_arguments)]
     fn descend_wide(
         &mut self,
         sat: &Sat32,
         i: u32,
         j: u32,
+        overlapping_start: Option<BLanes>,
         stack: &mut Stack,
         mut front: Recording<'_>,
         hit: &mut impl FnMut(u32, u32) -> bool,
@@ -665,28 +722,27 @@ impl<'a> Ctx<'a> {
         let pbase = stack.placed32.len();
         let (a, b) = (self.a, self.b);
         let s = sat.s();
-        // The start pair, in one lane; a cache's front walk starts many descents from single
-        // pairs, most of them separated: there the f64 test's early exits are cheaper.
-        self.counters.placements += 1;
-        self.counters.box_tests += 1;
-        let pj = sat.place(&b.nodes[j as usize]);
-        let margin = if front.is_some() {
-            let p64 = Placed::new(&b.nodes[j as usize], &self.frame.m, self.frame.t);
-            sat::separation(&a.nodes[i as usize], &p64, self.slack).map(|x| x.1)
-        } else {
-            let m = wide::separation4(&ALanes::splat(&a.nodes[i as usize]), &pj.splat(), s, 1);
-            (m.0[0] > 0.0).then(|| wide::margin64(m.0[0]))
+        let start = match overlapping_start {
+            Some(lanes) => lanes,
+            None => {
+                // The start pair, in one lane.
+                self.counters.placements += 1;
+                self.counters.box_tests += 1;
+                let pj = sat.place(&b.nodes[j as usize]).splat();
+                let m = wide::separation4(&ALanes::splat(&a.nodes[i as usize]), &pj, s, 1);
+                if m.0[0] > 0.0 {
+                    record_separated(&mut front, i, j, wide::margin64(m.0[0]));
+                    return false;
+                }
+                pj
+            }
         };
-        if let Some(margin) = margin {
-            record_separated(&mut front, i, j, margin);
-            return false;
-        }
         let (qa_all, qb_all) = (a.quads(), b.quads());
         // A B box is named `4 · block + lane`, a block being the lanes one step placed, stored
         // whole (one store per step instead of taking each surviving lane apart). As in
         // `descend64`, blocks never decrease up the stack, so when an entry is popped every
         // block above its own is finished with.
-        stack.placed32.push(pj.splat());
+        stack.placed32.push(start);
         stack.pairs.push((i, j, (pbase as u32) << 2));
         while stack.pairs.len() > base {
             let (i, j, p) = stack.pairs.pop().expect("non-empty");
@@ -694,10 +750,10 @@ impl<'a> Ctx<'a> {
             let na = &a.nodes[i as usize];
             let nb = &b.nodes[j as usize];
             if na.is_leaf() && nb.is_leaf() {
-                record_pairs(&mut front, OVERLAP, std::iter::once((i, j)));
+                record_pairs(&mut front, std::iter::once((i, j)));
                 if self.leaf_pair(i, j, hit) {
                     let rest = stack.pairs[base..].iter().map(|&(a, b, _)| (a, b));
-                    record_pairs(&mut front, UNTESTED, rest);
+                    record_pairs(&mut front, rest);
                     stack.pairs.truncate(base);
                     stack.placed32.truncate(pbase);
                     return true;
@@ -966,7 +1022,7 @@ pub fn collide_cached(
         // The walk may spend at most half a fresh traversal: a stale front is abandoned early.
         let budget = cache.fresh_work / 2;
         let mut hit = hit_fn(first, &mut found, &mut c.pairs);
-        let (done, descents) = walk_front(
+        let (done, charged) = walk_front(
             &mut ctx,
             &mut cache.front,
             &mut cache.scratch,
@@ -975,7 +1031,7 @@ pub fn collide_cached(
             &mut hit,
         );
         drop(hit);
-        let work = ctx.counters.work() - before + walked as u64 / 8 + WALK_DESCENT_WORK * descents;
+        let work = ctx.counters.work() - before + walked as u64 / 8 + charged;
         if !done || 4 * work > 3 * cache.fresh_work {
             // The front saved less than a quarter of a fresh traversal's work: drop it and back
             // off (a walk's work unit costs more time than a fresh wide traversal's, so a
@@ -1044,70 +1100,142 @@ fn hit_fn<'a>(
     }
 }
 
-/// Extra work charged per descent a front walk starts, on top of its counters: a descent from a
-/// single pair pays a full f64 box test and placement, and a fresh wide traversal decides four
-/// pairs per test, so the walk's counters alone undercount its time next to a fresh traversal.
-/// Three (it was two with the looser motion bound): with two, fronts on the near-contact knots
-/// saved about 4 % of the work and cost 10 % more time (first contact, cached 1.10-1.13×; 1.06
-/// with three); with four, the touching all-pairs front of `coherent_front_does_less_work` at
-/// leaf 1, which saves 3× the work, was dropped.
-const WALK_DESCENT_WORK: u64 = 3;
+/// Work charged on top of a front walk's counters per four-lane re-test of expired entries
+/// (and, on the f64 traversal, per descent, each of which re-tests one entry): the walk's
+/// gathers and scattered loads cost more per test than a fresh wide traversal's steps, so its
+/// counters alone undercount its time next to a fresh traversal. Three: set when each expired
+/// entry started its own descent (with two, fronts on the near-contact knots saved about 4 %
+/// of the work and cost 10 % more time; with four, the touching all-pairs front of
+/// `coherent_front_does_less_work` at leaf 1, which saves 3× the work, was dropped), and
+/// measured again with batched re-tests (charging descents from overlapping entries as well
+/// changed the near-contact knots by under 2 %).
+const WALK_STEP_WORK: u64 = 3;
 
 /// Walks the front (see [`collide_cached`]) in place: returns whether it finished within
-/// `budget`, and how many descents it started. Separated pairs whose margin still exceeds the
-/// motion since their test are kept untested; the others are traversed afresh from where they
-/// are. Every leaf pair is covered exactly once whatever the front holds, so the answer never
-/// depends on the cache; an abandoned walk's results are incomplete (the caller starts again
-/// from the root).
+/// `budget`, and the work to charge on top of its counters ([`WALK_STEP_WORK`] per re-test
+/// step). Separated pairs whose margin still exceeds the motion since their test are kept
+/// untested. The others (expired) are re-tested four at a time in lanes: a pair separated
+/// again only gets its new bound, one that overlaps is traversed from where it is. Every leaf
+/// pair is covered exactly once whatever the front holds, so the answer never depends on the
+/// cache; an abandoned walk's results are incomplete (the caller starts again from the root).
+/// A walk whose expired entries alone would cost more than `budget` is abandoned before it
+/// starts.
 ///
 /// A separated entry whose bound still holds is only read, never moved, so a query on a
-/// coherent front costs one comparison per valid entry. An entry that is traversed again is
-/// replaced by the first entry its descent records, the others appended after the walked part
-/// (`scratch` holds them meanwhile); appended entries are fresh and not walked again in this
-/// query. On a hit (first contact) the descent's untested pairs are recorded the same way and
-/// every entry not reached stays as it is, so the front remains a cut.
+/// coherent front costs one comparison per valid entry (eight at a time). An entry that is
+/// traversed again is replaced by the first entry its descent records, the others appended
+/// after the walked part (`scratch` holds them meanwhile); appended entries are fresh and not
+/// walked again in this query. On a hit (first contact) the descent's untested pairs are
+/// recorded the same way and every entry not reached stays as it is, so the front remains a
+/// cut.
 fn walk_front(
     ctx: &mut Ctx<'_>,
-    front: &mut Vec<FrontEntry>,
-    scratch: &mut Vec<FrontEntry>,
+    front: &mut Front,
+    scratch: &mut Front,
     clock: f64,
     budget: u64,
     hit: &mut impl FnMut(u32, u32) -> bool,
 ) -> (bool, u64) {
     let start = ctx.counters.work();
-    let mut descents = 0u64;
+    let mut charged = 0u64;
     let mut stack = Stack::new();
     let limit = clock + ctx.slack;
     let walked = front.len();
+    // Each expired entry costs at least its lane (a box test and a placement) and a quarter
+    // of its step's charge: when that alone exceeds the budget, the walk would be abandoned
+    // half way, after spending it (a quarter of the near-contact knots' walks were; first
+    // contact there went from 1.06× to 0.98-1.00× of the plain time).
+    let expired = front.count_expired(walked, limit) as u64;
+    if expired * (8 + WALK_STEP_WORK) / 4 > budget {
+        return (false, 0);
+    }
     // One pass in either mode, in front order: a touching first-contact query is mostly
     // decided by the witness before the walk, and a disjoint one re-tests every expired entry
     // anyway (two passes, overlapping leaf pairs first, cost more than they found early).
-    {
-        for k in 0..walked {
-            let e = front[k];
-            // Non-separated entries carry a bound of -∞: always traversed again.
-            if limit < e.bound {
+    let mut k = 0;
+    loop {
+        // The next (up to) four expired entries.
+        let mut batch = [0usize; 4];
+        let mut n = 0;
+        while n < 4 {
+            k = front.next_expired(k, walked, limit);
+            if k >= walked {
+                break;
+            }
+            batch[n] = k;
+            n += 1;
+            k += 1;
+        }
+        if n == 0 {
+            return (true, charged);
+        }
+        if ctx.counters.work() - start + charged > budget {
+            return (false, charged);
+        }
+        // Most expired entries are separated again: one four-lane test re-tests them all and
+        // only refreshes their bounds in place. (Pairs beyond f32 take the f64 way, one at a
+        // time from their own descent.)
+        let (overlapping, placed) = match ctx.sat32 {
+            Some(sat) => {
+                charged += WALK_STEP_WORK;
+                let (mut ia, mut ib) = ([0u32; 4], [0u32; 4]);
+                for (l, &e) in batch[..n].iter().enumerate() {
+                    (ia[l], ib[l]) = front.pairs[e];
+                }
+                ctx.counters.box_tests += n as u64;
+                ctx.counters.placements += n as u64;
+                let placed = sat.place_lanes(&ctx.b.nodes, &ib, n);
+                let m = wide::separation4(
+                    &ALanes::gather(&ctx.a.nodes, &ia, n),
+                    &placed,
+                    sat.s(),
+                    (1 << n) - 1,
+                );
+                let mut overlapping = 0u32;
+                for (l, &e) in batch[..n].iter().enumerate() {
+                    if m.0[l] > 0.0 {
+                        front.bounds[e] = clock + wide::margin64(m.0[l]);
+                    } else {
+                        overlapping |= 1 << l;
+                    }
+                }
+                (overlapping, Some((sat, placed)))
+            }
+            None => ((1 << n) - 1, None),
+        };
+        // The overlapping ones are traversed from where they are (their test is not
+        // repeated); each such descent's counters count its work.
+        for (l, &e) in batch[..n].iter().enumerate() {
+            if overlapping & (1 << l) == 0 {
                 continue;
             }
-            if ctx.counters.work() - start + WALK_DESCENT_WORK * descents > budget {
-                return (false, descents);
-            }
-            descents += 1;
             scratch.clear();
-            let stop = ctx.descend(e.a, e.b, &mut stack, Some((scratch, clock)), hit);
+            let (a, b) = front.pairs[e];
+            let rec = Some((&mut *scratch, clock));
+            let stop = match &placed {
+                Some((sat, lanes)) => {
+                    let start = Some(lanes.broadcast(l));
+                    ctx.descend_wide(sat, a, b, start, &mut stack, rec, hit)
+                }
+                None => {
+                    charged += WALK_STEP_WORK;
+                    ctx.descend64(a, b, &mut stack, rec, hit)
+                }
+            };
             // A descent records at least its start pair's outcome (separated, a leaf pair, or
             // untested after a hit), so the slot is always refilled.
             debug_assert!(!scratch.is_empty());
-            if let Some((&head, tail)) = scratch.split_first() {
-                front[k] = head;
-                front.extend_from_slice(tail);
+            if !scratch.is_empty() {
+                front.pairs[e] = scratch.pairs[0];
+                front.bounds[e] = scratch.bounds[0];
+                front.pairs.extend_from_slice(&scratch.pairs[1..]);
+                front.bounds.extend_from_slice(&scratch.bounds[1..]);
             }
             if stop {
-                return (true, descents);
+                return (true, charged);
             }
         }
     }
-    (true, descents)
 }
 
 #[cfg(test)]
@@ -1174,6 +1302,163 @@ mod tests {
             assert!(wide_boxes > 0 && binary_boxes > 0);
             assert!(wide_boxes < 2 * binary_boxes && binary_boxes < 2 * wide_boxes);
         }
+    }
+}
+
+/// The coherence cache's front walk: its scan, its batched re-tests on both traversals, and
+/// the walk it refuses to start.
+#[cfg(test)]
+mod walk_tests {
+    use super::*;
+    use crate::tree::BuildOptions;
+    use frcd_geom::{DQuat, shapes};
+    use rand::{Rng, SeedableRng};
+
+    /// The eight-at-a-time scan finds the same expired pairs as a pair-by-pair one, at every
+    /// chunk boundary, with -∞ (always expired) and NaN bounds among them.
+    #[test]
+    fn front_scan_finds_every_expired_pair() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        for len in [0usize, 1, 7, 8, 9, 16, 17, 40, 203] {
+            for density in [0.0, 0.02, 0.3, 1.0] {
+                let mut f = Front::default();
+                for k in 0..len {
+                    let bound = if rng.random_bool(density) {
+                        match k % 3 {
+                            0 => f64::NEG_INFINITY,
+                            1 => f64::NAN,
+                            _ => rng.random_range(0.0..1.0),
+                        }
+                    } else {
+                        rng.random_range(1.0..2.0)
+                    };
+                    f.push(k as u32, 0, bound);
+                }
+                let limit = 1.0;
+                // Expired unless the bound is known greater than the limit.
+                let naive: Vec<usize> = (0..len)
+                    .filter(|&k| {
+                        f.bounds[k].partial_cmp(&limit) != Some(std::cmp::Ordering::Greater)
+                    })
+                    .collect();
+                for end in [len, len / 2] {
+                    let mut found = Vec::new();
+                    let mut k = 0;
+                    loop {
+                        k = f.next_expired(k, end, limit);
+                        if k >= end {
+                            break;
+                        }
+                        found.push(k);
+                        k += 1;
+                    }
+                    let want: Vec<usize> = naive.iter().copied().filter(|&k| k < end).collect();
+                    assert_eq!(found, want, "len {len} density {density} end {end}");
+                    assert_eq!(f.count_expired(end, limit), want.len());
+                }
+            }
+        }
+    }
+
+    /// Slow coherent motion near contact, where fronts are walked every query: the cached
+    /// answers equal the oracle's on the wide traversal (four-lane re-tests) and on the binary
+    /// one (one descent per expired pair), in both modes, and the wide walk saves work.
+    #[test]
+    fn batched_walks_agree_with_the_oracle_on_both_traversals() {
+        let ma = shapes::torus(1.0, 0.3, 32, 12).unwrap();
+        let mb = shapes::icosphere(0.4, 2);
+        let opts = BuildOptions::default();
+        let (ta, tb) = (ObbTree::build(&ma, &opts), ObbTree::build(&mb, &opts));
+        for t in [Traversal::Wide, Traversal::Binary] {
+            for mode in [Mode::AllPairs, Mode::FirstContact] {
+                let req = Request {
+                    mode,
+                    ..Request::default()
+                };
+                let mut cache = PairCache::new();
+                let (mut plain, mut cached, mut touching, mut walked) = (0, 0, 0, 0);
+                with_traversal(t, || {
+                    for k in 0..80 {
+                        // Slowly from the middle of the hole into the tube.
+                        let x = 0.26 + 0.0015 * k as f64;
+                        let pb = Pose::new(
+                            DVec3::new(x, 0.0, 0.02),
+                            DQuat::from_rotation_z(0.004 * k as f64),
+                        );
+                        let pa = Pose::IDENTITY;
+                        let truth = crate::oracle::pairs(&ma, &pa, &mb, &pb);
+                        touching += !truth.is_empty() as u32;
+                        walked += (cache.front_len() > 0) as u32;
+                        let p = collide(&ta, &pa, &tb, &pb, &req);
+                        let c = collide_cached(&ta, &pa, &tb, &pb, &req, &mut cache);
+                        assert_eq!(c.collide, !truth.is_empty(), "{t:?} {mode:?} step {k}");
+                        match mode {
+                            Mode::AllPairs => assert_eq!(c.pairs, truth, "{t:?} step {k}"),
+                            _ => {
+                                if let Some(w) = c.witness {
+                                    assert!(truth.binary_search(&w).is_ok(), "{t:?} step {k}");
+                                }
+                            }
+                        }
+                        if k > 0 {
+                            plain += p.counters.work();
+                            cached += c.counters.work();
+                        }
+                    }
+                });
+                assert!(touching > 10 && touching < 70, "{touching}");
+                assert!(
+                    walked > 20,
+                    "{t:?} {mode:?}: a front before {walked} queries"
+                );
+                if t == Traversal::Wide {
+                    assert!(
+                        cached < plain,
+                        "{mode:?}: cached work {cached}, plain {plain}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// A front whose expired pairs alone would cost more than the budget is not walked at
+    /// all: no work, no pair, the front left as it was.
+    #[test]
+    fn hopeless_walk_is_abandoned_before_any_work() {
+        let ma = shapes::icosphere(1.0, 3);
+        let mb = shapes::icosphere(0.5, 3);
+        let opts = BuildOptions::default();
+        let (ta, tb) = (ObbTree::build(&ma, &opts), ObbTree::build(&mb, &opts));
+        let pb = Pose::new(DVec3::new(1.1, 1.1, 0.0), DQuat::IDENTITY);
+        let mut ctx = Ctx::new(&ta, &Pose::IDENTITY, &tb, &pb, Method::Exact);
+        assert!(ctx.sat32.is_some());
+        let (mut front, mut scratch, mut stack) =
+            (Front::default(), Front::default(), Stack::new());
+        let mut none = |_: u32, _: u32| -> bool { panic!("apart: no pair") };
+        ctx.descend(0, 0, &mut stack, Some((&mut front, 0.0)), &mut none);
+        assert!(front.len() > 8, "{}", front.len());
+        let fresh = ctx.counters.work();
+        // A clock past every bound: all expired.
+        let clock = front.bounds.iter().fold(0.0f64, |m, &b| m.max(b)) + 1.0;
+        let before = (front.pairs.clone(), front.bounds.clone());
+        ctx.counters = Counters::default();
+        let budget = front.len() as u64 * 2;
+        let (done, charged) =
+            walk_front(&mut ctx, &mut front, &mut scratch, clock, budget, &mut none);
+        assert!(!done);
+        assert_eq!((charged, ctx.counters), (0, Counters::default()));
+        assert_eq!((front.pairs.clone(), front.bounds.clone()), before);
+        // With the budget of a fresh traversal it walks, and finds the same: apart.
+        let (done, _) = walk_front(
+            &mut ctx,
+            &mut front,
+            &mut scratch,
+            clock,
+            4 * fresh,
+            &mut none,
+        );
+        assert!(done);
+        assert!(ctx.counters.box_tests > 0);
     }
 }
 
