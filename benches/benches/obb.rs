@@ -270,7 +270,8 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// (FRCD_BENCH_PROFILE_MODE=all: all pairs) in a loop for that long, for a sampling profiler,
 /// instead of the class's checks and benchmarks. FRCD_BENCH_PROFILE_MODE=cached (cached-all:
 /// all pairs) runs the whole sequence in order with a coherence cache instead, emptied at each
-/// repetition, as the split runs do. True when it ran.
+/// repetition, as the split runs do; `touching` (`touching-all`: all pairs) runs the plain
+/// queries of the touching steps instead of the disjoint ones. True when it ran.
 fn profile_loop(p: &Pair) -> bool {
     let Some(secs) = std::env::var("FRCD_BENCH_PROFILE")
         .ok()
@@ -284,7 +285,7 @@ fn profile_loop(p: &Pair) -> bool {
     }
     let which = std::env::var("FRCD_BENCH_PROFILE_MODE").unwrap_or_default();
     let mode = match which.as_str() {
-        "all" | "cached-all" => Mode::AllPairs,
+        "all" | "cached-all" | "touching-all" => Mode::AllPairs,
         _ => Mode::FirstContact,
     };
     let (ta, tb) = (&p.frcd[0], &p.frcd[1]);
@@ -314,14 +315,16 @@ fn profile_loop(p: &Pair) -> bool {
         );
         return true;
     }
+    let touching = which.starts_with("touching");
+    let kind = if touching { "touching" } else { "disjoint" };
     let steps: Vec<_> = p
         .scene
         .frames
         .iter()
-        .filter(|f| !collide(ta, &f[0], tb, &f[1], &r).collide)
+        .filter(|f| collide(ta, &f[0], tb, &f[1], &r).collide == touching)
         .collect();
     if steps.is_empty() {
-        eprintln!("[profile] {}: no disjoint steps to profile", p.scene.name);
+        eprintln!("[profile] {}: no {kind} steps to profile", p.scene.name);
         return true;
     }
     let start = Instant::now();
@@ -333,7 +336,7 @@ fn profile_loop(p: &Pair) -> bool {
         queries += steps.len() as u64;
     }
     eprintln!(
-        "[profile] {}: {queries} disjoint queries, {:.2} us each",
+        "[profile] {}: {queries} {kind} queries, {:.2} us each",
         p.scene.name,
         start.elapsed().as_secs_f64() * 1e6 / queries as f64
     );

@@ -470,6 +470,23 @@ fn scaled_spectral_bound(d: DMat3) -> f64 {
     lambda.sqrt() * (1.0 + 1e-12)
 }
 
+/// A triangle in A's frame with its axis-aligned box (the leaf test's cheap rejection).
+#[derive(Clone, Copy)]
+struct PlacedTriangle {
+    tri: Triangle,
+    aabb: Aabb,
+}
+
+impl PlacedTriangle {
+    #[inline(always)]
+    fn new(tri: Triangle) -> Self {
+        PlacedTriangle {
+            aabb: tri.aabb(),
+            tri,
+        }
+    }
+}
+
 /// The traversal stack: node pairs, each naming its B box (placed in A's frame) in `placed`
 /// (f64 boxes for the f64 traversal) or in `placed32` (the wide f32 traversal: the lanes one
 /// step placed, kept whole, named `4 · block + lane`).
@@ -487,6 +504,53 @@ impl Stack {
             placed: Vec::with_capacity(64),
             placed32: Vec::with_capacity(64),
         }
+    }
+}
+
+thread_local! {
+    /// This thread's traversal stack between queries: its buffers (about 27 KB to start with,
+    /// then as deep as the deepest traversal) are reused instead of allocated and freed by
+    /// every query that passes the top volume.
+    static STACK: std::cell::Cell<Stack> = std::cell::Cell::new(Stack::default());
+}
+
+/// The thread's [`Stack`], lent to one query and given back (emptied) when dropped, on every
+/// return path. A query started inside another's callback finds the slot empty and gets a
+/// fresh stack.
+struct PooledStack(Stack);
+
+impl PooledStack {
+    fn take() -> Self {
+        let stack = STACK.try_with(|c| c.take()).unwrap_or_default();
+        PooledStack(if stack.pairs.capacity() == 0 {
+            Stack::new()
+        } else {
+            stack
+        })
+    }
+}
+
+impl std::ops::Deref for PooledStack {
+    type Target = Stack;
+    fn deref(&self) -> &Stack {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for PooledStack {
+    fn deref_mut(&mut self) -> &mut Stack {
+        &mut self.0
+    }
+}
+
+impl Drop for PooledStack {
+    fn drop(&mut self) {
+        let mut stack = std::mem::take(&mut self.0);
+        stack.pairs.clear();
+        stack.placed.clear();
+        stack.placed32.clear();
+        // Fails only while the thread's locals are being destroyed: then the stack is freed.
+        let _ = STACK.try_with(|c| c.set(stack));
     }
 }
 
@@ -599,23 +663,66 @@ impl<'a> Ctx<'a> {
     /// Exact per-pair box check, then the triangle test.
     #[inline]
     fn tri_pair(&mut self, ta: u32, tb: u32) -> bool {
-        let t1 = &self.a.triangle(ta);
-        let t2 = self.frame.triangle(&self.b.triangle(tb));
-        if !t1.aabb().intersects(&t2.aabb()) {
+        let t1 = PlacedTriangle::new(self.a.triangle(ta));
+        let t2 = PlacedTriangle::new(self.frame.triangle(&self.b.triangle(tb)));
+        self.placed_tri_pair(&t1, &t2)
+    }
+
+    /// [`Ctx::tri_pair`] on triangles already fetched, placed in A's frame and boxed.
+    #[inline(always)]
+    fn placed_tri_pair(&mut self, t1: &PlacedTriangle, t2: &PlacedTriangle) -> bool {
+        if !t1.aabb.intersects(&t2.aabb) {
             return false;
         }
         self.counters.tri_tests += 1;
-        frcd_tritri::intersects(self.method, t1, &t2)
+        frcd_tritri::intersects(self.method, &t1.tri, &t2.tri)
     }
 
     /// Tests the triangles of a leaf pair; calls `hit` on each touching pair, stops when it
-    /// returns `true`.
+    /// returns `true`. Each triangle is fetched from its mesh, placed and boxed once per leaf
+    /// pair, not once per triangle pair (the same values, so the same answers).
     #[inline]
     fn leaf_pair(&mut self, i: u32, j: u32, hit: &mut impl FnMut(u32, u32) -> bool) -> bool {
+        let tas = self.a.node_triangles(i);
+        let tbs = self.b.node_triangles(j);
+        // One instance per B leaf size up to four (the default leaf holds two), so the placed
+        // triangles live in an array of exactly that size (nothing to fill first).
+        if let Ok(tbs) = <&[u32; 2]>::try_from(tbs) {
+            self.placed_leaf_pair(tas, tbs, hit)
+        } else if let Ok(tbs) = <&[u32; 1]>::try_from(tbs) {
+            self.placed_leaf_pair(tas, tbs, hit)
+        } else if let Ok(tbs) = <&[u32; 3]>::try_from(tbs) {
+            self.placed_leaf_pair(tas, tbs, hit)
+        } else if let Ok(tbs) = <&[u32; 4]>::try_from(tbs) {
+            self.placed_leaf_pair(tas, tbs, hit)
+        } else {
+            // Larger leaves (a build option): triangle by triangle.
+            for &ta in tas {
+                for &tb in tbs {
+                    if self.tri_pair(ta, tb) && hit(ta, tb) {
+                        return true;
+                    }
+                }
+            }
+            false
+        }
+    }
+
+    /// [`Ctx::leaf_pair`] with B's `N` triangles placed first.
+    #[inline]
+    fn placed_leaf_pair<const N: usize>(
+        &mut self,
+        tas: &[u32],
+        tbs: &[u32; N],
+        hit: &mut impl FnMut(u32, u32) -> bool,
+    ) -> bool {
         let (a, b) = (self.a, self.b);
-        for &ta in a.node_triangles(i) {
-            for &tb in b.node_triangles(j) {
-                if self.tri_pair(ta, tb) && hit(ta, tb) {
+        let placed: [PlacedTriangle; N] =
+            std::array::from_fn(|k| PlacedTriangle::new(self.frame.triangle(&b.triangle(tbs[k]))));
+        for &ta in tas {
+            let t1 = PlacedTriangle::new(a.triangle(ta));
+            for (t2, &tb) in placed.iter().zip(tbs) {
+                if self.placed_tri_pair(&t1, t2) && hit(ta, tb) {
                     return true;
                 }
             }
@@ -955,7 +1062,7 @@ pub fn collide(
         c.counters = ctx.counters;
         return c;
     }
-    let mut stack = Stack::new();
+    let mut stack = PooledStack::take();
     match request.mode {
         Mode::FirstContact => {
             let mut w = None;
@@ -1057,7 +1164,7 @@ pub fn collide_cached(
         let mut front = std::mem::take(&mut cache.front);
         front.clear();
         let before = ctx.counters.work();
-        let mut stack = Stack::new();
+        let mut stack = PooledStack::take();
         let mut hit = hit_fn(first, &mut found, &mut c.pairs);
         ctx.descend(
             0,
@@ -1138,7 +1245,7 @@ fn walk_front(
 ) -> (bool, u64) {
     let start = ctx.counters.work();
     let mut charged = 0u64;
-    let mut stack = Stack::new();
+    let mut stack = PooledStack::take();
     let limit = clock + ctx.slack;
     let walked = front.len();
     // Each expired entry costs at least its lane (a box test and a placement) and a quarter
@@ -1251,7 +1358,7 @@ mod tests {
     fn wide_and_binary_traversals_agree_with_the_oracle() {
         let ma = shapes::icosphere(1.0, 3);
         let mb = shapes::subdivide(&shapes::cuboid(DVec3::new(0.9, 0.3, 0.6)));
-        for leaf in [1, 2, 4] {
+        for leaf in [1, 2, 4, 5] {
             let opts = BuildOptions {
                 max_leaf_triangles: leaf,
                 ..BuildOptions::default()
@@ -1418,6 +1525,48 @@ mod walk_tests {
                     );
                 }
             }
+        }
+    }
+
+    /// The thread's pooled stack comes back empty after queries that stop at a first contact
+    /// and keeps its buffers, with and without a cache, so it neither grows query after query
+    /// nor reallocates.
+    #[test]
+    fn pooled_stack_comes_back_empty_and_keeps_its_buffers() {
+        let t = ObbTree::build(&shapes::icosphere(1.0, 3), &BuildOptions::default());
+        let near = Pose::from_translation(DVec3::new(1.0, 0.0, 0.0));
+        let pooled = || {
+            STACK.with(|c| {
+                let s = c.take();
+                let r = (
+                    s.pairs.len() + s.placed.len() + s.placed32.len(),
+                    s.pairs.capacity(),
+                );
+                c.set(s);
+                r
+            })
+        };
+        let mut cache = PairCache::new();
+        for k in 0..4 {
+            let hit = if k % 2 == 0 {
+                collide(&t, &Pose::IDENTITY, &t, &near, &Request::default())
+            } else {
+                collide_cached(
+                    &t,
+                    &Pose::IDENTITY,
+                    &t,
+                    &near,
+                    &Request::default(),
+                    &mut cache,
+                )
+            };
+            assert!(hit.collide);
+            let (len, capacity) = pooled();
+            assert_eq!(len, 0, "query {k} left entries on the pooled stack");
+            assert!(
+                capacity >= 64,
+                "query {k}: the pooled stack lost its buffers"
+            );
         }
     }
 
