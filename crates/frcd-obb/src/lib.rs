@@ -1,5 +1,7 @@
 #![doc = include_str!("../README.md")]
-#![forbid(unsafe_code)]
+// One unsafe call in the crate: the AVX2 build of the traversal, entered only after the CPU
+// was checked for AVX2 (`isa.rs`, `query.rs`).
+#![deny(unsafe_code)]
 //! ## API overview
 //!
 //! - [`ObbTree::build`]: Gottschalk's OBBTree over a [`frcd_geom::TriMesh`] (fit rule
@@ -24,6 +26,7 @@
 mod build;
 mod checked;
 pub mod distance;
+mod isa;
 mod nodes;
 pub mod oracle;
 mod query;

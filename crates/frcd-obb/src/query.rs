@@ -2,6 +2,7 @@
 //! with the hybrid top volume, optional solid-mode containment and a caller-owned coherence
 //! cache.
 
+use crate::isa;
 use crate::nodes::TNode;
 use crate::sat::{self, Placed, SLACK_REL};
 use crate::solid::point_inside_tree;
@@ -559,6 +560,10 @@ impl Drop for PooledStack {
 pub(crate) enum Traversal {
     /// The wide f32 traversal when the query's magnitudes fit f32 (`wide.rs`), else the f64 one.
     Wide,
+    /// The wide traversal compiled for the baseline instruction set even where the CPU has
+    /// AVX2 (tests comparing the two builds of the hot loop, `isa.rs`).
+    #[cfg_attr(not(test), allow(dead_code))]
+    WideBaseline,
     /// The binary f64 traversal (one box pair per test, `sat.rs`).
     #[cfg_attr(not(test), allow(dead_code))]
     Binary,
@@ -588,19 +593,24 @@ struct Ctx<'a> {
     /// The f32 box test of the wide traversal, `None` where the query's magnitudes do not fit
     /// f32 (then the binary f64 traversal runs).
     sat32: Option<Sat32>,
+    /// Run the wide traversal's AVX2 build (`isa.rs`): the CPU has AVX2 and no test asked for
+    /// the baseline build.
+    avx2: bool,
 }
 
 impl<'a> Ctx<'a> {
     fn new(a: &'a ObbTree, pose_a: &Pose, b: &'a ObbTree, pose_b: &Pose, method: Method) -> Self {
         let frame = RelativeFrame::new(pose_a, pose_b);
         let slack = query_slack(a, b, &frame);
-        let sat32 = match TRAVERSAL.with(|c| c.get()) {
-            Traversal::Wide => {
+        let traversal = TRAVERSAL.with(|c| c.get());
+        let sat32 = match traversal {
+            Traversal::Wide | Traversal::WideBaseline => {
                 let mag = a.radius_from_origin + b.radius_from_origin + frame.t.length();
                 Sat32::new(frame.m, frame.t, slack, mag)
             }
             Traversal::Binary => None,
         };
+        let avx2 = traversal == Traversal::Wide && isa::has_avx2();
         Ctx {
             a,
             b,
@@ -609,6 +619,7 @@ impl<'a> Ctx<'a> {
             method,
             counters: Counters::default(),
             sat32,
+            avx2,
         }
     }
 
@@ -816,6 +827,49 @@ impl<'a> Ctx<'a> {
     /// is done again.
     #[allow(clippy::too_many_arguments)]
     fn descend_wide(
+        &mut self,
+        sat: &Sat32,
+        i: u32,
+        j: u32,
+        overlapping_start: Option<BLanes>,
+        stack: &mut Stack,
+        front: Recording<'_>,
+        hit: &mut impl FnMut(u32, u32) -> bool,
+    ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: `avx2` is true only where the running CPU reports AVX2 (`Ctx::new`,
+            // `isa::has_avx2`), the one feature `descend_wide_avx2` is compiled with.
+            #[allow(unsafe_code)]
+            return unsafe {
+                self.descend_wide_avx2(sat, i, j, overlapping_start, stack, front, hit)
+            };
+        }
+        self.descend_wide_body(sat, i, j, overlapping_start, stack, front, hit)
+    }
+
+    /// [`Ctx::descend_wide`] compiled with AVX2 (`isa.rs`): the same operations, encoded with
+    /// AVX's three-operand instructions and 256-bit f64 lanes.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[allow(clippy::too_many_arguments)]
+    fn descend_wide_avx2(
+        &mut self,
+        sat: &Sat32,
+        i: u32,
+        j: u32,
+        overlapping_start: Option<BLanes>,
+        stack: &mut Stack,
+        front: Recording<'_>,
+        hit: &mut impl FnMut(u32, u32) -> bool,
+    ) -> bool {
+        self.descend_wide_body(sat, i, j, overlapping_start, stack, front, hit)
+    }
+
+    /// The body of [`Ctx::descend_wide`], inlined into each of its instruction-set builds.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn descend_wide_body(
         &mut self,
         sat: &Sat32,
         i: u32,
@@ -1243,6 +1297,40 @@ fn walk_front(
     budget: u64,
     hit: &mut impl FnMut(u32, u32) -> bool,
 ) -> (bool, u64) {
+    #[cfg(target_arch = "x86_64")]
+    if ctx.avx2 {
+        // SAFETY: `avx2` is true only where the running CPU reports AVX2 (`Ctx::new`,
+        // `isa::has_avx2`), the one feature `walk_front_avx2` is compiled with.
+        #[allow(unsafe_code)]
+        return unsafe { walk_front_avx2(ctx, front, scratch, clock, budget, hit) };
+    }
+    walk_front_body(ctx, front, scratch, clock, budget, hit)
+}
+
+/// [`walk_front`] compiled with AVX2 (`isa.rs`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn walk_front_avx2(
+    ctx: &mut Ctx<'_>,
+    front: &mut Front,
+    scratch: &mut Front,
+    clock: f64,
+    budget: u64,
+    hit: &mut impl FnMut(u32, u32) -> bool,
+) -> (bool, u64) {
+    walk_front_body(ctx, front, scratch, clock, budget, hit)
+}
+
+/// The body of [`walk_front`], inlined into each of its instruction-set builds.
+#[inline(always)]
+fn walk_front_body(
+    ctx: &mut Ctx<'_>,
+    front: &mut Front,
+    scratch: &mut Front,
+    clock: f64,
+    budget: u64,
+    hit: &mut impl FnMut(u32, u32) -> bool,
+) -> (bool, u64) {
     let start = ctx.counters.work();
     let mut charged = 0u64;
     let mut stack = PooledStack::take();
@@ -1397,8 +1485,8 @@ mod tests {
                         }
                         if offset == 1.0 {
                             match t {
-                                Traversal::Wide => wide_boxes += c.counters.box_tests,
                                 Traversal::Binary => binary_boxes += c.counters.box_tests,
+                                _ => wide_boxes += c.counters.box_tests,
                             }
                         }
                     });
@@ -1409,6 +1497,81 @@ mod tests {
             assert!(wide_boxes > 0 && binary_boxes > 0);
             assert!(wide_boxes < 2 * binary_boxes && binary_boxes < 2 * wide_boxes);
         }
+    }
+}
+
+/// The AVX2 build of the wide traversal against its baseline build (`isa.rs`).
+#[cfg(test)]
+mod isa_tests {
+    use super::*;
+    use crate::tree::BuildOptions;
+    use frcd_geom::{DQuat, shapes};
+
+    /// Both builds run the same IEEE operations, so on a coherent sequence (fronts recorded,
+    /// walked and refreshed) and on incoherent jumps they give the same pairs, witnesses,
+    /// counters, and front margins bit for bit; and both give the oracle's pairs.
+    #[test]
+    fn avx2_and_baseline_builds_agree_bit_for_bit() {
+        if !isa::has_avx2() {
+            eprintln!("note: this CPU has no AVX2; both runs use the baseline build");
+        }
+        let ma = shapes::torus(1.0, 0.35, 40, 16).expect("valid torus");
+        let mb = shapes::icosphere(0.5, 3);
+        let opts = BuildOptions::default();
+        let (ta, tb) = (ObbTree::build(&ma, &opts), ObbTree::build(&mb, &opts));
+        let mut caches = [
+            [PairCache::new(), PairCache::new()],
+            [PairCache::new(), PairCache::new()],
+        ];
+        let (mut touching, mut fronts) = (0, 0);
+        for k in 0..160 {
+            // Slow coherent motion through the ring, with a jump every 20th step.
+            let s = if k % 20 == 19 {
+                3.7 * k as f64
+            } else {
+                0.02 * k as f64
+            };
+            let pa = Pose::new(DVec3::ZERO, DQuat::from_rotation_z(0.3 * s));
+            let pb = Pose::new(
+                DVec3::new(1.0 - 1.1 * s.sin(), 0.1 * s.cos(), 0.1 * (2.0 * s).sin()),
+                DQuat::from_axis_angle(DVec3::new(0.2, 1.0, 0.4).normalize(), s),
+            );
+            let truth = crate::oracle::pairs(&ma, &pa, &mb, &pb);
+            touching += !truth.is_empty() as u32;
+            for (m, mode) in [Mode::FirstContact, Mode::AllPairs].into_iter().enumerate() {
+                let req = Request {
+                    mode,
+                    ..Request::default()
+                };
+                let run = |t: Traversal, cache: &mut PairCache| {
+                    with_traversal(t, || {
+                        let plain = collide(&ta, &pa, &tb, &pb, &req);
+                        let cached = collide_cached(&ta, &pa, &tb, &pb, &req, cache);
+                        (plain, cached)
+                    })
+                };
+                let [c0, c1] = &mut caches[m];
+                let (p0, q0) = run(Traversal::Wide, c0);
+                let (p1, q1) = run(Traversal::WideBaseline, c1);
+                for (x, y, what) in [(&p0, &p1, "plain"), (&q0, &q1, "cached")] {
+                    assert_eq!(x.collide, y.collide, "step {k} {mode:?} {what}");
+                    assert_eq!(x.pairs, y.pairs, "step {k} {mode:?} {what}");
+                    assert_eq!(x.witness, y.witness, "step {k} {mode:?} {what}");
+                    assert_eq!(x.counters, y.counters, "step {k} {mode:?} {what}");
+                    assert_eq!(x.collide, !truth.is_empty(), "step {k} {mode:?} {what}");
+                }
+                if mode == Mode::AllPairs {
+                    assert_eq!(p0.pairs, truth, "step {k}");
+                }
+                assert_eq!(c0.front.pairs, c1.front.pairs, "step {k} {mode:?}");
+                let bits = |f: &Front| f.bounds.iter().map(|b| b.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&c0.front), bits(&c1.front), "step {k} {mode:?}");
+                fronts += !c0.front.is_empty() as u32;
+            }
+        }
+        // The sequence exercises both answers and recorded fronts.
+        assert!(touching > 20 && touching < 150, "{touching}");
+        assert!(fronts > 40, "{fronts}");
     }
 }
 

@@ -1,7 +1,8 @@
 //! The wide box test of the traversal: one 15-axis separating-axis test run on four box pairs
 //! at once, in four f32 lanes (a plain `[f32; 4]` type the compiler vectorises: SSE on the
-//! x86-64 baseline, NEON on aarch64; no unsafe code, no runtime detection, no fused
-//! multiply-add, so every operation is one IEEE rounding).
+//! x86-64 baseline, AVX in the traversal's AVX2 build chosen at run time (`isa.rs`), NEON on
+//! aarch64; no unsafe code here, no fused multiply-add, so every operation is one IEEE
+//! rounding whichever build runs).
 //!
 //! The traversal (`query.rs`) tests one node of one tree against the (up to four) nodes two
 //! levels below a node of the other tree: A's grandchildren against one placed box of B, or
