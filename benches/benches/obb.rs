@@ -525,6 +525,8 @@ fn bench_pairs(c: &mut Criterion) {
         opts.max_leaf_triangles = leaf;
         eprintln!("[leaf] max_leaf_triangles = {leaf}");
     }
+    // The wide traversal's build (AVX2 or baseline), to report beside the timings.
+    eprintln!("[isa] wide traversal: {}", frcd_obb::wide_traversal_isa());
     let mut list: Vec<(Scene, usize)> = Vec::new();
     if want("dense") {
         let mut s = scenes::icospheres_sweep(5, 200);

@@ -18,6 +18,18 @@
 //! `FRCD_OBB_ISA=baseline` in the environment (read once per process) makes every query take
 //! the baseline build, to measure one against the other in the same binary.
 
+/// Which build of the wide traversal this process's queries run: `"avx2"` or `"baseline"`
+/// (SSE2 on x86-64, the target's own vector unit elsewhere), for benchmarks and logs to
+/// report next to their timings. Both builds give the same answers bit for bit.
+///
+/// ```
+/// let isa = frcd_obb::wide_traversal_isa();
+/// assert!(isa == "avx2" || isa == "baseline");
+/// ```
+pub fn wide_traversal_isa() -> &'static str {
+    if has_avx2() { "avx2" } else { "baseline" }
+}
+
 /// True when the running CPU has AVX2 and the environment does not ask for the baseline build
 /// (always false off x86-64).
 #[inline]

@@ -1,6 +1,6 @@
 #![doc = include_str!("../README.md")]
-// One unsafe call in the crate: the AVX2 build of the traversal, entered only after the CPU
-// was checked for AVX2 (`isa.rs`, `query.rs`).
+// The crate's only unsafe code: two calls into the AVX2 build of the traversal and of the front
+// walk, entered only after the CPU was checked for AVX2 (`isa.rs`, `query.rs`).
 #![deny(unsafe_code)]
 //! ## API overview
 //!
@@ -41,6 +41,7 @@ mod world;
 pub use checked::{PairSide, QueryError, try_collide, try_collide_cached};
 pub use frcd_geom::fit::FitMethod;
 pub use frcd_tritri::{Contact, Method};
+pub use isa::wide_traversal_isa;
 pub use query::{
     Collision, Containment, Counters, Mode, PairCache, RelativeFrame, Request, TopVolume, collide,
     collide_cached, containment,
