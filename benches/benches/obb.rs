@@ -29,6 +29,21 @@
 //!   fandisks (5,750);
 //! - `knots_slow` (class 4): the knots turning slowly and steadily (coherent), 200 steps;
 //! - `sparse/*` (class 5): every body pair of 1,000 sparse bodies, and a `World` over 10,000.
+//!
+//! Step-by-step tools (environment variables, read by the per-step pass of each pair class):
+//!
+//! - `FRCD_BENCH_STEPS=DIR` writes `DIR/<scene>.<first|all>`, one line per step: index,
+//!   touching (0/1), µs plain, cached and parry3d-f64, box tests, triangle tests, placements.
+//!   `benches/peers/pqp_collide.cpp` writes the same steps for PQP with `PQP_STEPS=DIR`
+//!   (`<file>.txt.<first|all>`: index, touching, µs, OBB tests, triangle tests), so the two
+//!   can be joined step by step (`join`) to see where one library loses;
+//! - `FRCD_BENCH_COUNT=1` prints only the work of plain first contact (box and triangle tests
+//!   per touching and per disjoint query, no timing) and skips everything else: time-free
+//!   counts for comparing traversal orders or trees;
+//! - `FRCD_BENCH_HOT=3,17,...` times plain first contact on those steps alone, each repeated
+//!   200 times back to back (data hot in the caches), before the per-step pass: set against
+//!   the per-step pass (the sequence's order, caches as the previous step left them) it shows
+//!   what memory costs.
 
 #[path = "common/cad.rs"]
 mod cad;
@@ -348,6 +363,59 @@ fn profile_loop(p: &Pair) -> bool {
 fn split(p: &Pair) {
     let (ta, tb) = (&p.frcd[0], &p.frcd[1]);
     let n = p.scene.steps();
+    // FRCD_BENCH_COUNT and FRCD_BENCH_HOT: module docs.
+    if std::env::var("FRCD_BENCH_COUNT").is_ok() {
+        let r = req(Mode::FirstContact);
+        let (mut nt, mut bt, mut tt, mut nd, mut bd) = (0u64, 0u64, 0u64, 0u64, 0u64);
+        let s = Instant::now();
+        for f in &p.scene.frames {
+            let c = collide(ta, &f[0], tb, &f[1], &r);
+            if c.collide {
+                nt += 1;
+                bt += c.counters.box_tests;
+                tt += c.counters.tri_tests;
+            } else {
+                nd += 1;
+                bd += c.counters.box_tests;
+            }
+        }
+        eprintln!(
+            "[count] {} touching {nt} box/q {:.0} tri/q {:.1} | disjoint {nd} box/q {:.0} | {:.2} ms",
+            p.scene.name,
+            bt as f64 / nt.max(1) as f64,
+            tt as f64 / nt.max(1) as f64,
+            bd as f64 / nd.max(1) as f64,
+            s.elapsed().as_secs_f64() * 1e3
+        );
+        return;
+    }
+    if let Ok(hot) = std::env::var("FRCD_BENCH_HOT") {
+        let steps = hot
+            .split(',')
+            .filter_map(|x| x.trim().parse::<usize>().ok());
+        for k in steps.filter(|&k| k < n) {
+            let f = &p.scene.frames[k];
+            let r = req(Mode::FirstContact);
+            let mut best = f64::INFINITY;
+            let mut c0 = None;
+            for _ in 0..200 {
+                let s = Instant::now();
+                let c = collide(ta, &f[0], tb, &f[1], &r);
+                best = best.min(s.elapsed().as_secs_f64());
+                c0 = Some(c.counters);
+            }
+            let c0 = c0.unwrap_or_default();
+            eprintln!(
+                "[hot] {} step {k}: {:.1} us, box {} ({:.1} ns each) tri {} placements {}",
+                p.scene.name,
+                best * 1e6,
+                c0.box_tests,
+                best * 1e9 / c0.box_tests.max(1) as f64,
+                c0.tri_tests,
+                c0.placements
+            );
+        }
+    }
     for mode in [Mode::FirstContact, Mode::AllPairs] {
         let r = req(mode);
         let mut t = [
@@ -417,6 +485,29 @@ fn split(p: &Pair) {
             Mode::FirstContact => "first",
             Mode::AllPairs => "all",
         };
+        // FRCD_BENCH_STEPS=DIR: per-step times and work (one line per step: index, touching,
+        // µs plain, cached, parry3d-f64, box tests, triangle tests, placements), to compare
+        // step by step with the peers' drivers.
+        if let Ok(dir) = std::env::var("FRCD_BENCH_STEPS") {
+            let lines: String = (0..n)
+                .map(|k| {
+                    format!(
+                        "{k} {} {:.3} {:.3} {:.3} {} {} {}\n",
+                        touching[k] as u8,
+                        t[0][k] * 1e6,
+                        t[1][k] * 1e6,
+                        t[2][k] * 1e6,
+                        work[k].box_tests,
+                        work[k].tri_tests,
+                        work[k].placements
+                    )
+                })
+                .collect();
+            let path = std::path::Path::new(&dir).join(format!("{}.{label}", p.scene.name));
+            if let Err(e) = std::fs::write(&path, lines) {
+                eprintln!("[split] cannot write {}: {e}", path.display());
+            }
+        }
         eprintln!(
             "[split] {} {label}: steps disjoint {} touching {} | median us disjoint/touching: frcd {:.1}/{:.1}, cached {:.1}/{:.1}, parry3d-f64 {:.1}/{:.1} | total ms: frcd {:.2}, cached {:.2}, parry3d-f64 {:.2} | parry/frcd {:.2}x (best of frcd, cached {:.2}x) | frcd per query: disjoint {:.0} box {:.0} tri {:.0} placements, touching {:.0} box {:.0} tri; {:.1} ns per box test (disjoint steps, all work)",
             p.scene.name,

@@ -5,11 +5,15 @@
 //   ./pqp_collide DIR/*.txt
 // Per step: the fastest of RUNS passes (passes outer, steps inner, as frcd's obb bench does),
 // then totals and medians of disjoint/touching steps (split by frcd's exported answer).
+// PQP_STEPS=DIR also writes each step (index, touching, µs, OBB tests, triangle tests) to
+// DIR/<file>.<first|all>, to join with the obb bench's FRCD_BENCH_STEPS files.
 #include "PQP.h"
 #include <cstdio>
 #include <chrono>
 #include <vector>
 #include <algorithm>
+#include <cstdlib>
+#include <string>
 typedef std::chrono::steady_clock clk;
 static PQP_Model* read_model(FILE* f) {
   int n; if (fscanf(f, "%d", &n) != 1) return 0;
@@ -39,7 +43,7 @@ int main(int argc, char** argv) {
     }
     fclose(f);
     for (int flag : {PQP_FIRST_CONTACT, PQP_ALL_CONTACTS}) {
-      std::vector<double> t(n, 1e300); std::vector<int> got(n); double bv = 0, tri = 0;
+      std::vector<double> t(n, 1e300); std::vector<int> got(n), bvs(n), tris(n); double bv = 0, tri = 0;
       for (int run = 0; run < RUNS; run++) {
         for (int i = 0; i < n; i++) {
           PQP_CollideResult res;
@@ -48,10 +52,21 @@ int main(int argc, char** argv) {
           double e = std::chrono::duration<double>(clk::now() - t0).count();
           t[i] = std::min(t[i], e);
           got[i] = flag == PQP_FIRST_CONTACT ? res.Colliding() : res.NumPairs();
-          if (run == 0) { bv += res.NumBVTests(); tri += res.NumTriTests(); }
+          if (run == 0) { bv += res.NumBVTests(); tri += res.NumTriTests(); bvs[i] = res.NumBVTests(); tris[i] = res.NumTriTests(); }
         }
       }
       std::vector<double> dis, tou; double total = 0; int agree = 0;
+      // PQP_STEPS=DIR: per-step times and work, one line per step, to compare step by step.
+      if (const char* dir = getenv("PQP_STEPS")) {
+        std::string name = std::string(argv[a]);
+        name = std::string(dir) + "/" + name.substr(name.rfind('/') + 1) + (flag == PQP_FIRST_CONTACT ? ".first" : ".all");
+        if (FILE* o = fopen(name.c_str(), "w")) {
+          for (int i = 0; i < n; i++) fprintf(o, "%d %d %.3f %d %d\n", i, touch[i], t[i] * 1e6, bvs[i], tris[i]);
+          fclose(o);
+        } else {
+          perror(name.c_str());
+        }
+      }
       for (int i = 0; i < n; i++) {
         total += t[i];
         (touch[i] ? tou : dis).push_back(t[i] * 1e6);
