@@ -4,7 +4,10 @@
 // the f64 box, (lo rounded up, hi rounded down) are contained in it. Comparing the outer corners
 // can only add pairs; comparing the inner ones can only drop pairs. A pair whose outer boxes meet
 // is appended, flagged "uncertain" unless the inner boxes meet too; the CPU re-checks flagged
-// pairs in f64, so the final set equals the f64 all-pairs answer.
+// pairs in f64, so the final set equals the f64 all-pairs answer. No corner is subnormal (the
+// packer moves such values outward or inward to zero or the smallest normal), because a GPU may
+// flush subnormal comparison operands to zero: on an H200, planes at z = 1e-300 and 2e-300 were
+// "surely" overlapping before.
 //
 // Workgroup (x, y) compares the 64 boxes i of tile x with the 64 boxes j of tile y (j > i), the
 // j tile staged in workgroup memory: one invocation per i, 64 comparisons each.

@@ -18,7 +18,9 @@
 // Keys compare (key, index) lexicographically, so the order depends on the boxes only. The key
 // order agrees with f32 order (-0 and +0 are equal floats with adjacent keys), so once the scan
 // meets a q whose lo.x exceeds p's hi.x, every later q does too: no pair is missed. The f32
-// comparisons are exact (no arithmetic), so WGSL's rounding latitude does not apply.
+// comparisons are exact (no arithmetic), so WGSL's rounding latitude does not apply; but an
+// implementation may flush subnormal operands to zero even in a comparison (NVIDIA's Vulkan
+// driver does), so the packer (boxes.rs, body_box) stores no subnormal corner.
 
 const UNCERTAIN_FLAG: u32 = 0x80000000u;
 const PAD_KEY: u32 = 0xffffffffu;

@@ -1,5 +1,5 @@
 use crate::context::BOX_TILE;
-use crate::pack::{round_down, round_up};
+use crate::pack::{round_down_normal, round_up_normal};
 use crate::{GpuContext, GpuError};
 use frcd_geom::Aabb;
 use frcd_gpu::layout::{BodyBox, BoxParams};
@@ -130,14 +130,16 @@ impl BoxScratch {
 }
 
 /// The prelude's `BodyBox`: outer corners (rounded outward) and inner ones (rounded inward), as
-/// boxes.wgsl compares them.
+/// boxes.wgsl compares them. No corner is subnormal, so a GPU that flushes subnormal comparison
+/// operands to zero compares the values stored ([`round_up_normal`]).
 pub(crate) fn body_box(b: &Aabb) -> BodyBox {
     let (lo, hi) = (b.min, b.max);
+    let (up, dn) = (round_up_normal, round_down_normal);
     BodyBox {
-        lo_dn: [round_down(lo.x), round_down(lo.y), round_down(lo.z), 0.0],
-        hi_up: [round_up(hi.x), round_up(hi.y), round_up(hi.z), 0.0],
-        lo_up: [round_up(lo.x), round_up(lo.y), round_up(lo.z), 0.0],
-        hi_dn: [round_down(hi.x), round_down(hi.y), round_down(hi.z), 0.0],
+        lo_dn: [dn(lo.x), dn(lo.y), dn(lo.z), 0.0],
+        hi_up: [up(hi.x), up(hi.y), up(hi.z), 0.0],
+        lo_up: [up(lo.x), up(lo.y), up(lo.z), 0.0],
+        hi_dn: [dn(hi.x), dn(hi.y), dn(hi.z), 0.0],
     }
 }
 
@@ -255,4 +257,67 @@ pub(crate) fn decode(
     }
     answer.pairs = pairs;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use frcd_geom::DVec3;
+
+    /// The shader's `meet` on one axis as a GPU that flushes subnormal comparison operands to
+    /// zero evaluates it (`ftz`), or as stored.
+    fn meet(alo: f32, ahi: f32, blo: f32, bhi: f32, ftz: bool) -> bool {
+        let f = |x: f32| if ftz && x.is_subnormal() { 0.0 } else { x };
+        f(alo) <= f(bhi) && f(blo) <= f(ahi)
+    }
+
+    /// Intervals at and around f32's underflow and overflow thresholds: the outer test never
+    /// drops an overlapping pair and the inner ("surely overlapping") test never accepts a
+    /// separated one, with and without flush-to-zero. Before the packer kept subnormals out,
+    /// planes at z = 1e-300 and 2e-300 were "surely overlapping" on an H200.
+    #[test]
+    fn bounds_hold_under_flush_to_zero() {
+        let mut v = vec![0.0, 1.0, 1e39, f64::INFINITY];
+        for m in [1e-300, 2e-300, 1e-45, 1e-41, 3e-39, 1.1754942e-38] {
+            v.push(m);
+        }
+        v.push(f32::MIN_POSITIVE as f64);
+        v.push(f32::MIN_POSITIVE as f64 * (1.0 + 1e-12));
+        let v: Vec<f64> = v.iter().flat_map(|&x| [x, -x]).collect();
+        let boxes: Vec<Aabb> = v
+            .iter()
+            .flat_map(|&lo| v.iter().map(move |&hi| (lo, hi)))
+            .filter(|(lo, hi)| lo <= hi)
+            .map(|(lo, hi)| Aabb::new(DVec3::new(lo, 0.0, 0.0), DVec3::new(hi, 1.0, 1.0)))
+            .collect();
+        let packed: Vec<BodyBox> = boxes.iter().map(body_box).collect();
+        for p in &packed {
+            for x in p
+                .lo_dn
+                .iter()
+                .chain(&p.hi_up)
+                .chain(&p.lo_up)
+                .chain(&p.hi_dn)
+            {
+                assert!(!x.is_subnormal(), "subnormal bound {x:e}");
+            }
+        }
+        let mut checked = 0;
+        for (a, pa) in boxes.iter().zip(&packed) {
+            for (b, pb) in boxes.iter().zip(&packed) {
+                let exact = a.intersects(b);
+                for ftz in [false, true] {
+                    let outer = meet(pa.lo_dn[0], pa.hi_up[0], pb.lo_dn[0], pb.hi_up[0], ftz);
+                    let inner = meet(pa.lo_up[0], pa.hi_dn[0], pb.lo_up[0], pb.hi_dn[0], ftz);
+                    assert!(outer || !exact, "{a:?} {b:?} (ftz {ftz}): overlap dropped");
+                    assert!(
+                        !inner || exact,
+                        "{a:?} {b:?} (ftz {ftz}): false sure overlap"
+                    );
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 10_000, "{checked}");
+    }
 }

@@ -149,6 +149,7 @@ impl GpuContext {
 
     /// [`GpuContext::headless`] with options.
     pub fn headless_with(options: &HeadlessOptions) -> Result<Self, GpuError> {
+        let creating = frcd_gpu::creation_lock();
         let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
         if let Some(b) = options.backends {
             desc.backends = b;
@@ -192,6 +193,8 @@ impl GpuContext {
             info.backend,
             info.device_type
         );
+        // from_device_with takes the lock again for the pipelines.
+        drop(creating);
         Self::from_device_with(device, queue, &options.arena)
     }
 
@@ -214,10 +217,13 @@ impl GpuContext {
         let limits = device.limits();
         check_limits(&limits, &info.name)?;
         // A driver that rejects a shader or pipeline gives a typed error, not a panic.
+        let creating = frcd_gpu::creation_lock();
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let pipes = Pipelines::new(&device);
         let arena = crate::mesh::Arena::new(&device, &pipes.arena_bgl, &limits, arena);
-        if let Some(e) = pollster::block_on(scope.pop()) {
+        let failed = pollster::block_on(scope.pop());
+        drop(creating);
+        if let Some(e) = failed {
             // Display of a wgpu error is only its kind; the description names the cause.
             let reason = frcd_gpu::describe(&e);
             return Err(GpuError::Pipeline {

@@ -193,6 +193,48 @@ pub fn round_down(x: f64) -> f32 {
     if (f as f64) > x { f.next_down() } else { f }
 }
 
+/// `x` rounded to an f32 at or above it that flush-to-zero cannot move: [`round_up`], with a
+/// subnormal result moved up to the next zero or normal value (a positive one to
+/// `f32::MIN_POSITIVE`, a negative one to zero).
+///
+/// For bounds a shader only compares. WGSL lets an implementation flush subnormal operands to
+/// zero even in a comparison (NVIDIA's Vulkan driver does: on an H200 a box rounded up to the
+/// subnormal `1.4e-45` compared as `0`, below a neighbour's inner bound, and the pair was
+/// reported as surely overlapping). A zero or normal value compares as stored.
+///
+/// ```
+/// use frcd_gpgpu::pack::round_up_normal;
+/// assert_eq!(round_up_normal(1e-300), f32::MIN_POSITIVE);
+/// assert_eq!(round_up_normal(-1e-300), 0.0);
+/// assert_eq!(round_up_normal(0.5), 0.5);
+/// ```
+pub fn round_up_normal(x: f64) -> f32 {
+    let f = round_up(x);
+    match f.is_subnormal() {
+        true if f > 0.0 => f32::MIN_POSITIVE,
+        true => 0.0,
+        false => f,
+    }
+}
+
+/// `x` rounded to an f32 at or below it that flush-to-zero cannot move: [`round_down`], with a
+/// subnormal result moved down to the next zero or normal value (a positive one to zero, a
+/// negative one to `-f32::MIN_POSITIVE`). See [`round_up_normal`].
+///
+/// ```
+/// use frcd_gpgpu::pack::round_down_normal;
+/// assert_eq!(round_down_normal(1e-300), 0.0);
+/// assert_eq!(round_down_normal(-1e-300), -f32::MIN_POSITIVE);
+/// ```
+pub fn round_down_normal(x: f64) -> f32 {
+    let f = round_down(x);
+    match f.is_subnormal() {
+        true if f < 0.0 => -f32::MIN_POSITIVE,
+        true => 0.0,
+        false => f,
+    }
+}
+
 /// An OBB in f32 whose parallelepiped `{c + A s : |s_i| <= h_i}` holds the f64 one.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ObbF32 {

@@ -800,7 +800,13 @@ fn every_backend_is_correct_or_refused_at_creation() {
                 println!("SKIP backend {name}: {e}");
                 continue;
             }
-            Err(e @ (GpuError::Unsupported { .. } | GpuError::Pipeline { .. })) => {
+            // RequestDevice: an adapter whose driver cannot make a device (NVIDIA's GL through
+            // EGL in a headless VM: "Parent device is lost", seen on an H200).
+            Err(
+                e @ (GpuError::Unsupported { .. }
+                | GpuError::Pipeline { .. }
+                | GpuError::RequestDevice { .. }),
+            ) => {
                 println!("backend {name} refused at creation (typed): {e}");
                 continue;
             }

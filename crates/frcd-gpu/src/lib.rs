@@ -12,6 +12,26 @@ pub fn with_prelude(source: &str) -> String {
     format!("{PRELUDE}\n{source}")
 }
 
+/// Holds the creation of GPU objects in this process to one thread at a time; hold the guard
+/// while creating an instance, adapter, device or pipelines.
+///
+/// NVIDIA's Vulkan driver can hang when several threads create devices and pipelines at once:
+/// on an H200 (driver 580.159), two test threads each creating a context stopped with the GPU
+/// idle, every thread waiting on a lock, about one run in three; one thread at a time never
+/// hung. wgpu issues 10010 and 10234 report crashes from the same pattern. frcd's GPU crates
+/// take this lock in every constructor; creation is rare, so it costs nothing per frame. An
+/// engine creating its own devices or pipelines on other threads may take it as well.
+///
+/// ```
+/// let _guard = frcd_gpu::creation_lock();
+/// // ... create the instance, device and pipelines ...
+/// ```
+pub fn creation_lock() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    // A panic while holding it leaves nothing half-made that the next creator depends on.
+    LOCK.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// Setup and readback failures. Every variant keeps the typed wgpu cause as its source.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
@@ -56,6 +76,7 @@ pub struct AdapterOptions {
 
 /// A headless adapter (no surface).
 pub fn request_adapter(options: &AdapterOptions) -> Result<wgpu::Adapter, SetupError> {
+    let _creating = creation_lock();
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
     if let Some(b) = options.backends {
         desc.backends = b;
@@ -87,6 +108,7 @@ pub fn request_device(
     features: wgpu::Features,
     limits: wgpu::Limits,
 ) -> Result<(wgpu::Device, wgpu::Queue), SetupError> {
+    let _creating = creation_lock();
     pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
         label: Some(label),
         required_features: features,

