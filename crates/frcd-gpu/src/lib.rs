@@ -140,6 +140,19 @@ pub fn read_back(
     len: u64,
     index: wgpu::SubmissionIndex,
 ) -> Result<Vec<u8>, SetupError> {
+    read_back_with(device, buffer, len, index, <[u8]>::to_vec)
+}
+
+/// [`read_back`] without the copy: `read` is given the mapped bytes in place (the readback
+/// buffer's host memory) and its answer is returned; the buffer is unmapped afterwards. For
+/// large readbacks (an image-space query's 32 MB at 2,048² pixels) that are converted anyway.
+pub fn read_back_with<R>(
+    device: &wgpu::Device,
+    buffer: &wgpu::Buffer,
+    len: u64,
+    index: wgpu::SubmissionIndex,
+    read: impl FnOnce(&[u8]) -> R,
+) -> Result<R, SetupError> {
     let slice = buffer.slice(..len);
     let (tx, rx) = std::sync::mpsc::channel();
     slice.map_async(wgpu::MapMode::Read, move |r| {
@@ -168,10 +181,7 @@ pub fn read_back(
         }
     };
     mapped.map_err(SetupError::Map)?;
-    let bytes = slice
-        .get_mapped_range()
-        .map_err(SetupError::MapRange)?
-        .to_vec();
+    let answer = read(&slice.get_mapped_range().map_err(SetupError::MapRange)?);
     buffer.unmap();
-    Ok(bytes)
+    Ok(answer)
 }
