@@ -88,6 +88,18 @@ pub struct GpuContext {
     pub(crate) id: u64,
     submissions: AtomicU64,
     readbacks: AtomicU64,
+    /// Last field: the GPU objects above are dropped under `frcd_gpu::creation_lock` (see the
+    /// `Drop` impl).
+    _release: frcd_gpu::ReleaseCreationLock,
+}
+
+/// Dropping a context releases its pipelines, arena and device handle under
+/// `frcd_gpu::creation_lock`: NVIDIA's driver was seen to hang in `vkDestroyDevice` while other
+/// threads created contexts.
+impl Drop for GpuContext {
+    fn drop(&mut self) {
+        frcd_gpu::hold_creation_lock_for_drop();
+    }
 }
 
 impl std::fmt::Debug for GpuContext {
@@ -250,6 +262,7 @@ impl GpuContext {
             id: NEXT_CONTEXT_ID.fetch_add(1, Ordering::Relaxed),
             submissions: AtomicU64::new(0),
             readbacks: AtomicU64::new(0),
+            _release: frcd_gpu::ReleaseCreationLock::default(),
         })
     }
 

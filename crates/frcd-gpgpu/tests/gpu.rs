@@ -846,3 +846,38 @@ fn every_backend_is_correct_or_refused_at_creation() {
         assert!(!ran.is_empty(), "FRCD_REQUIRE_GPU=1 but no backend ran");
     }
 }
+
+/// Contexts created, used and dropped on several threads at once (what hung NVIDIA's driver on
+/// an H200 before creation and drops were serialised by `frcd_gpu::creation_lock`): every
+/// thread finishes with the oracle's answer. On lavapipe this checks that the lock never
+/// deadlocks (nested drops, creation inside a held lock); the hang itself needs NVIDIA.
+#[test]
+fn contexts_created_and_dropped_on_many_threads() {
+    if new_context().is_none() {
+        return;
+    }
+    let mesh = shapes::icosphere(1.0, 2);
+    let (pa, pb) = (
+        Pose::IDENTITY,
+        Pose::from_translation(DVec3::new(1.2, 0.3, 0.1)),
+    );
+    let want = oracle::pairs(&mesh, &pa, &mesh, &pb);
+    assert!(!want.is_empty());
+    std::thread::scope(|scope| {
+        for _ in 0..4 {
+            scope.spawn(|| {
+                for _ in 0..3 {
+                    let ctx = new_context().expect("an adapter was found above");
+                    let a = body(&ctx, mesh.clone());
+                    let got = ctx
+                        .collide(&a.gpu, &pa, &a.gpu, &pb, &mut QueryScratch::default())
+                        .expect("query");
+                    assert_eq!(got.pairs, want);
+                    // Meshes and scratch first, the context last: its drop releases the device.
+                    drop(a);
+                    drop(ctx);
+                }
+            });
+        }
+    });
+}

@@ -12,26 +12,83 @@ pub fn with_prelude(source: &str) -> String {
     format!("{PRELUDE}\n{source}")
 }
 
-/// Holds the creation of GPU objects in this process to one thread at a time; hold the guard
-/// while creating an instance, adapter, device or pipelines.
+/// Holds the creation (and, through [`hold_creation_lock_for_drop`], the destruction) of GPU
+/// objects in this process to one thread at a time; hold the guard while creating an instance,
+/// adapter, device or pipelines. Re-entrant: a thread that already holds it gets a guard that
+/// does nothing (so a device dropped inside a creation path cannot deadlock).
 ///
 /// NVIDIA's Vulkan driver can hang when several threads create and drop devices at once: on an
 /// H200 (driver 580.159), test binaries run on two threads, each test with its own context,
 /// stopped in 4 runs of 5 with the GPU idle and every thread in a futex wait (one backtrace:
 /// a thread in `vkDestroyDevice`); one thread at a time never hung. With creation under this
-/// lock, 0 of 6 such runs hung (1 of 3 at 16 threads still did: dropping is not covered).
+/// lock, 0 of 6 such runs hung (1 of 3 at 16 threads still did, before drops were covered).
 /// wgpu issues 10010 and 10234 report crashes from the same pattern. frcd's GPU crates take
-/// this lock in every constructor; creation is rare, so it costs nothing per frame. An engine
-/// creating its own devices or pipelines on other threads may take it as well.
+/// this lock in every constructor and while their contexts are dropped; both are rare, so it
+/// costs nothing per frame. An engine creating or dropping its own devices or pipelines on
+/// other threads may take it as well.
 ///
 /// ```
 /// let _guard = frcd_gpu::creation_lock();
 /// // ... create the instance, device and pipelines ...
+/// let _again = frcd_gpu::creation_lock(); // the same thread: no deadlock
 /// ```
-pub fn creation_lock() -> std::sync::MutexGuard<'static, ()> {
+pub fn creation_lock() -> CreationGuard {
     static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    if HELD.with(std::cell::Cell::get) {
+        return CreationGuard { guard: None };
+    }
     // A panic while holding it leaves nothing half-made that the next creator depends on.
-    LOCK.lock().unwrap_or_else(|e| e.into_inner())
+    let guard = LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    HELD.with(|h| h.set(true));
+    CreationGuard { guard: Some(guard) }
+}
+
+thread_local! {
+    /// Whether this thread holds [`creation_lock`].
+    static HELD: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+    /// Guards taken by [`hold_creation_lock_for_drop`], released by [`ReleaseCreationLock`].
+    static HELD_FOR_DROP: std::cell::RefCell<Vec<CreationGuard>> =
+        const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// The guard of [`creation_lock`]: the lock is released when the outermost guard of the thread
+/// is dropped.
+#[derive(Debug)]
+#[must_use = "the lock is released when the guard is dropped"]
+pub struct CreationGuard {
+    guard: Option<std::sync::MutexGuard<'static, ()>>,
+}
+
+impl Drop for CreationGuard {
+    fn drop(&mut self) {
+        if self.guard.take().is_some() {
+            HELD.with(|h| h.set(false));
+        }
+    }
+}
+
+/// Takes [`creation_lock`] for the rest of a value's drop. Call it first thing in the value's
+/// `Drop::drop` and make a [`ReleaseCreationLock`] the value's **last** field: Rust drops the
+/// fields after `drop` returns, in declaration order, so every GPU object before the marker is
+/// released under the lock, the device too when the value held its last reference (wgpu
+/// destroys a device with its last object).
+pub fn hold_creation_lock_for_drop() {
+    let guard = creation_lock();
+    // During thread-local destruction (a context kept in a thread_local) the stash may be gone:
+    // then the guard is dropped here and the fields drop without the lock.
+    let _ = HELD_FOR_DROP.try_with(|held| held.borrow_mut().push(guard));
+}
+
+/// The last field of a value whose `Drop` calls [`hold_creation_lock_for_drop`]: releases that
+/// lock once the fields before it are gone.
+#[derive(Clone, Debug, Default)]
+pub struct ReleaseCreationLock(());
+
+impl Drop for ReleaseCreationLock {
+    fn drop(&mut self) {
+        let guard = HELD_FOR_DROP.try_with(|held| held.borrow_mut().pop());
+        drop(guard);
+    }
 }
 
 /// Setup and readback failures. Every variant keeps the typed wgpu cause as its source.
@@ -186,4 +243,78 @@ pub fn read_back_with<R>(
     let answer = read(&slice.get_mapped_range().map_err(SetupError::MapRange)?);
     buffer.unmap();
     Ok(answer)
+}
+
+#[cfg(test)]
+mod lock_tests {
+    use super::*;
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+    static HELD_DURING_FIELD_DROP: AtomicBool = AtomicBool::new(false);
+
+    /// Records whether this thread held the lock when it was dropped.
+    struct Probe;
+    impl Drop for Probe {
+        fn drop(&mut self) {
+            HELD_DURING_FIELD_DROP.store(HELD.with(std::cell::Cell::get), Ordering::SeqCst);
+        }
+    }
+
+    struct Owner {
+        _probe: Probe,
+        _release: ReleaseCreationLock,
+    }
+    impl Drop for Owner {
+        fn drop(&mut self) {
+            hold_creation_lock_for_drop();
+        }
+    }
+
+    /// The fields before the marker drop under the lock; the lock is free afterwards, also when
+    /// the owner is dropped while the thread already holds the lock (re-entrant, no deadlock).
+    #[test]
+    fn fields_drop_under_the_lock_and_it_is_released_after() {
+        drop(Owner {
+            _probe: Probe,
+            _release: ReleaseCreationLock::default(),
+        });
+        assert!(HELD_DURING_FIELD_DROP.load(Ordering::SeqCst));
+        assert!(!HELD.with(std::cell::Cell::get), "released after the drop");
+        {
+            let _outer = creation_lock();
+            drop(Owner {
+                _probe: Probe,
+                _release: ReleaseCreationLock::default(),
+            });
+            assert!(
+                HELD.with(std::cell::Cell::get),
+                "the outer guard still holds it"
+            );
+        }
+        assert!(!HELD.with(std::cell::Cell::get));
+    }
+
+    /// One thread at a time inside the lock, across threads.
+    #[test]
+    fn threads_take_turns() {
+        static INSIDE: AtomicUsize = AtomicUsize::new(0);
+        static MAX: AtomicUsize = AtomicUsize::new(0);
+        let threads: Vec<_> = (0..4)
+            .map(|_| {
+                std::thread::spawn(|| {
+                    for _ in 0..50 {
+                        let _g = creation_lock();
+                        let now = INSIDE.fetch_add(1, Ordering::SeqCst) + 1;
+                        MAX.fetch_max(now, Ordering::SeqCst);
+                        std::thread::yield_now();
+                        INSIDE.fetch_sub(1, Ordering::SeqCst);
+                    }
+                })
+            })
+            .collect();
+        for t in threads {
+            t.join().expect("no panic");
+        }
+        assert_eq!(MAX.load(Ordering::SeqCst), 1);
+    }
 }

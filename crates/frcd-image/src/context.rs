@@ -17,6 +17,16 @@ pub struct ImageContext {
     device: wgpu::Device,
     queue: wgpu::Queue,
     adapter: Option<wgpu::AdapterInfo>,
+    /// Last field: the device and queue are dropped under `frcd_gpu::creation_lock`.
+    _release: frcd_gpu::ReleaseCreationLock,
+}
+
+/// Dropping a context releases its device and queue under `frcd_gpu::creation_lock` (NVIDIA's
+/// driver was seen to hang in `vkDestroyDevice` while other threads created devices).
+impl Drop for ImageContext {
+    fn drop(&mut self) {
+        frcd_gpu::hold_creation_lock_for_drop();
+    }
 }
 
 /// Smallest `max_texture_dimension_2d` the detector accepts (a 64-pixel image must fit).
@@ -50,6 +60,7 @@ impl ImageContext {
             device,
             queue,
             adapter: None,
+            _release: frcd_gpu::ReleaseCreationLock::default(),
         })
     }
 
@@ -115,6 +126,7 @@ impl ImageContext {
             device,
             queue,
             adapter: Some(info),
+            _release: frcd_gpu::ReleaseCreationLock::default(),
         })
     }
 

@@ -230,6 +230,16 @@ pub struct ImageDetector {
     peel: wgpu::RenderPipeline,
     parity: wgpu::RenderPipeline,
     resolve: wgpu::ComputePipeline,
+    /// Last field: the pipelines and the context are dropped under `frcd_gpu::creation_lock`.
+    _release: frcd_gpu::ReleaseCreationLock,
+}
+
+/// Dropping a detector releases its pipelines and context under `frcd_gpu::creation_lock`
+/// (NVIDIA's driver was seen to hang in `vkDestroyDevice` while other threads created devices).
+impl Drop for ImageDetector {
+    fn drop(&mut self) {
+        frcd_gpu::hold_creation_lock_for_drop();
+    }
 }
 
 /// The WGSL sources of the detector (also validated by a CPU-only naga test).
@@ -406,6 +416,7 @@ impl ImageDetector {
             peel,
             parity,
             resolve,
+            _release: frcd_gpu::ReleaseCreationLock::default(),
         })
     }
 

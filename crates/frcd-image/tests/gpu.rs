@@ -686,3 +686,54 @@ fn targets_are_allocated_once_per_resolution() {
         },
     );
 }
+
+/// Detectors created, used and dropped on several threads at once (creation and drops are
+/// serialised by `frcd_gpu::creation_lock`; NVIDIA's driver hung without it): each thread gets
+/// the same answer as the shared detector, and nothing deadlocks.
+#[test]
+fn detectors_created_and_dropped_on_many_threads() {
+    let Some(shared) = detector() else {
+        println!("SKIP detectors_created_and_dropped_on_many_threads: no GPU adapter");
+        return;
+    };
+    let mesh = shapes::icosphere(1.0, 2);
+    let pose_b = Pose::from_translation(DVec3::new(1.3, 0.2, 0.1));
+    let want = {
+        let a = shared.upload("a", &mesh).unwrap();
+        let r = shared
+            .query(
+                &mut ImageScratch::default(),
+                &a,
+                &Pose::IDENTITY,
+                &a,
+                &pose_b,
+                &opts(64),
+            )
+            .unwrap();
+        (r.interfering_pixels, r.volume)
+    };
+    assert!(want.0 > 0);
+    std::thread::scope(|scope| {
+        for _ in 0..3 {
+            scope.spawn(|| {
+                for _ in 0..2 {
+                    let det = ImageDetector::headless().expect("an adapter was found above");
+                    let a = det.upload("a", &mesh).unwrap();
+                    let r = det
+                        .query(
+                            &mut ImageScratch::default(),
+                            &a,
+                            &Pose::IDENTITY,
+                            &a,
+                            &pose_b,
+                            &opts(64),
+                        )
+                        .unwrap();
+                    assert_eq!((r.interfering_pixels, r.volume), want);
+                    drop(a);
+                    drop(det);
+                }
+            });
+        }
+    });
+}
