@@ -8,7 +8,9 @@
 //! - CPU, all threads: the same body pairs on rayon's pool;
 //! - GPU: `GpuContext::collide` on each body pair in turn, transfers included (pose upload,
 //!   submission, readback, CPU re-decision of uncertain pairs). Mesh uploads happen once and are
-//!   reported separately.
+//!   reported separately;
+//! - GPU batch: the step's body pairs in one `GpuContext::collide_batch` (one submission, one
+//!   readback), its answers checked equal to the CPU's first.
 //!
 //! Every GPU answer is checked against the CPU's (a difference aborts the run).
 //!
@@ -111,6 +113,8 @@ struct PairRow {
     cpu1: f64,
     cpu_all: f64,
     gpu: f64,
+    /// All body pairs of the step in one `collide_batch` (one submission, one readback).
+    gpu_batch: f64,
     upload: f64,
 }
 
@@ -329,8 +333,25 @@ pub fn run(mut o: Opts) -> Result<()> {
                 );
             }
         });
+        // The same step as one batch: checked equal first, then timed.
+        let batch: Vec<_> = poses
+            .iter()
+            .map(|(pa, pb)| (&gpu_mesh, pa, &gpu_mesh, pb))
+            .collect();
+        let got = ctx.collide_batch(&batch, &mut scratch)?;
+        for (k, (pa, pb)) in poses.iter().enumerate() {
+            if got.results[k].pairs != collide(&tree, pa, &tree, pb, &request).pairs {
+                bail!("level {level}: the batch differs from the CPU on body pair {k}");
+            }
+        }
+        let gpu_batch = median_ms(o.runs, || {
+            std::hint::black_box(
+                ctx.collide_batch(&batch, &mut scratch)
+                    .expect("checked above"),
+            );
+        });
         println!(
-            "level {level}: {} triangles/body, {touching} pairs, cpu1 {cpu1:.2} ms, cpu{threads} {cpu_all:.2} ms, gpu {gpu:.2} ms",
+            "level {level}: {} triangles/body, {touching} pairs, cpu1 {cpu1:.2} ms, cpu{threads} {cpu_all:.2} ms, gpu {gpu:.2} ms, gpu batch {gpu_batch:.2} ms",
             mesh.triangle_count()
         );
         rows.push(PairRow {
@@ -341,6 +362,7 @@ pub fn run(mut o: Opts) -> Result<()> {
             cpu1,
             cpu_all,
             gpu,
+            gpu_batch,
             upload,
         });
     }
@@ -546,13 +568,13 @@ pub fn run(mut o: Opts) -> Result<()> {
     )?;
     writeln!(
         md,
-        "| icosphere level | triangles / body | touching pairs / step | GPU uncertain / step | CPU 1 thread ms | CPU {threads} threads ms | GPU ms (transfers incl.) | GPU / CPU 1 | GPU / CPU {threads} | upload ms / mesh |"
+        "| icosphere level | triangles / body | touching pairs / step | GPU uncertain / step | CPU 1 thread ms | CPU {threads} threads ms | GPU ms (transfers incl.) | GPU / CPU 1 | GPU / CPU {threads} | GPU batch ms | batch / CPU 1 | upload ms / mesh |"
     )?;
-    writeln!(md, "|---|---|---|---|---|---|---|---|---|---|")?;
+    writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|---|")?;
     for r in &rows {
         writeln!(
             md,
-            "| {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.1} |",
+            "| {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.1} |",
             r.level,
             r.triangles,
             r.touching,
@@ -562,6 +584,8 @@ pub fn run(mut o: Opts) -> Result<()> {
             r.gpu,
             r.gpu / r.cpu1,
             r.gpu / r.cpu_all,
+            r.gpu_batch,
+            r.gpu_batch / r.cpu1,
             r.upload
         )?;
     }
@@ -582,11 +606,18 @@ pub fn run(mut o: Opts) -> Result<()> {
         &rows.iter().map(|r| r.cpu_all).collect::<Vec<_>>(),
         &gpu,
     );
-    writeln!(md, "\n- {c1}\n- {cn}")?;
+    let cb = crossover(
+        "batch vs CPU 1 thread",
+        &sizes,
+        &rows.iter().map(|r| r.cpu1).collect::<Vec<_>>(),
+        &rows.iter().map(|r| r.gpu_batch).collect::<Vec<_>>(),
+    );
+    writeln!(md, "\n- {c1}\n- {cn}\n- {cb}")?;
     writeln!(
         md,
         "- GPU ms: per step, each body pair one query (pose upload, one submission, one readback, \
-         exact CPU re-decision of the uncertain pairs). Upload: one-time packing, texture upload \
+         exact CPU re-decision of the uncertain pairs). GPU batch ms: the step's body pairs in one \
+         `collide_batch` (one submission, one readback). Upload: one-time packing, texture upload \
          and first submission per mesh.\n"
     )?;
     if !frame_rows.is_empty() {
@@ -734,7 +765,9 @@ fn plot(path: &std::path::Path, rows: &[PairRow], threads: usize, adapter: &str)
     use crate::plot::{self, Axis, Chart, Legend, Series};
     // Log-log, drawn as log10 values on linear axes (the axes say "log10").
     let xs: Vec<f64> = rows.iter().map(|r| (r.triangles as f64).log10()).collect();
-    let all = rows.iter().flat_map(|r| [r.cpu1, r.cpu_all, r.gpu]);
+    let all = rows
+        .iter()
+        .flat_map(|r| [r.cpu1, r.cpu_all, r.gpu, r.gpu_batch]);
     let ymax = all.clone().fold(f64::MIN, f64::max).max(1e-3).log10() + 0.3;
     let ymin = all.fold(f64::MAX, f64::min).max(1e-4).log10() - 0.3;
     let (x0, x1) = plot::extent(xs.iter().copied()).unwrap_or((0.0, 1.0));
@@ -757,6 +790,11 @@ fn plot(path: &std::path::Path, rows: &[PairRow], threads: usize, adapter: &str)
         plot::GREEN,
     ))
     .series(series("GPU (transfers incl.)".into(), |r| r.gpu, plot::RED))
+    .series(series(
+        "GPU, one batch per step".into(),
+        |r| r.gpu_batch,
+        plot::ORANGE,
+    ))
     .legend(Legend::UpperLeft);
     plot::write_svg(path, (860, 520), &[chart])
 }
@@ -908,6 +946,7 @@ mod tests {
                 cpu1: 0.01 * 3f64.powi(l as i32),
                 cpu_all: 0.006 * 3f64.powi(l as i32),
                 gpu: 0.5 + 0.1 * l as f64,
+                gpu_batch: 0.3 + 0.05 * l as f64,
                 upload: 1.0,
             })
             .collect();
@@ -919,6 +958,7 @@ mod tests {
             "CPU 1 thread",
             "CPU 2 threads",
             "GPU (transfers incl.)",
+            "GPU, one batch per step",
             "test adapter",
         ] {
             assert!(svg.contains(s), "{s} missing");
