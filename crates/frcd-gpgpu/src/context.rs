@@ -122,6 +122,18 @@ fn unsupported(adapter: &str, what: &'static str, needed: u64, available: u64) -
     }
 }
 
+/// frcd-gpu's setup errors as this crate's, with the driver's reason in the message.
+fn setup_error(e: frcd_gpu::SetupError) -> GpuError {
+    match e {
+        frcd_gpu::SetupError::NoAdapter(source) => GpuError::NoAdapter(source.to_string()),
+        frcd_gpu::SetupError::RequestDevice { adapter, source } => GpuError::RequestDevice {
+            adapter,
+            reason: source.to_string(),
+        },
+        other => GpuError::Internal(format!("GPU setup: {other}")),
+    }
+}
+
 /// First limit of `have` below [`requirements`].
 fn check_limits(have: &wgpu::Limits, adapter: &str) -> Result<(), GpuError> {
     let mut first: Option<GpuError> = None;
@@ -161,52 +173,26 @@ impl GpuContext {
 
     /// [`GpuContext::headless`] with options.
     pub fn headless_with(options: &HeadlessOptions) -> Result<Self, GpuError> {
-        let creating = frcd_gpu::creation_lock();
-        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
-        if let Some(b) = options.backends {
-            desc.backends = b;
-        }
-        let instance = wgpu::Instance::new(desc);
-        let adapter =
-            if options.low_power || options.force_fallback_adapter || options.backends.is_some() {
-                pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-                    power_preference: if options.low_power {
-                        wgpu::PowerPreference::LowPower
-                    } else {
-                        wgpu::PowerPreference::HighPerformance
-                    },
-                    force_fallback_adapter: options.force_fallback_adapter,
-                    compatible_surface: None,
-                    ..Default::default()
-                }))
-            } else {
-                pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
-                    &instance, None,
-                ))
-            }
-            .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        // Adapter and device through the shared setup of frcd-gpu (the creation lock included).
+        let adapter = frcd_gpu::request_adapter(&frcd_gpu::AdapterOptions {
+            backends: options.backends,
+            low_power: options.low_power,
+            force_fallback_adapter: options.force_fallback_adapter,
+        })
+        .map_err(setup_error)?;
         let info = adapter.get_info();
         check_downlevel(&adapter.get_downlevel_capabilities(), &info.name)?;
         let limits = adapter.limits();
         check_limits(&limits, &info.name)?;
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("frcd-gpgpu"),
-            required_features: wgpu::Features::empty(),
-            required_limits: limits,
-            ..Default::default()
-        }))
-        .map_err(|e| GpuError::RequestDevice {
-            adapter: info.name.clone(),
-            reason: e.to_string(),
-        })?;
+        let (device, queue) =
+            frcd_gpu::request_device(&adapter, "frcd-gpgpu", wgpu::Features::empty(), limits)
+                .map_err(setup_error)?;
         log::info!(
             "frcd-gpgpu: adapter '{}' ({:?}, {:?})",
             info.name,
             info.backend,
             info.device_type
         );
-        // from_device_with takes the lock again for the pipelines.
-        drop(creating);
         Self::from_device_with(device, queue, &options.arena)
     }
 
