@@ -698,9 +698,10 @@ fn detectors_created_and_dropped_on_many_threads() {
     };
     let mesh = shapes::icosphere(1.0, 2);
     let pose_b = Pose::from_translation(DVec3::new(1.3, 0.2, 0.1));
-    let want = {
-        let a = shared.upload("a", &mesh).unwrap();
-        let r = shared
+    // Interfering pixels and volume of the mesh against itself at `pose_b`, on `det`.
+    let answer = |det: &ImageDetector| {
+        let a = det.upload("a", &mesh).unwrap();
+        let r = det
             .query(
                 &mut ImageScratch::default(),
                 &a,
@@ -712,25 +713,14 @@ fn detectors_created_and_dropped_on_many_threads() {
             .unwrap();
         (r.interfering_pixels, r.volume)
     };
+    let want = answer(shared);
     assert!(want.0 > 0);
     std::thread::scope(|scope| {
         for _ in 0..3 {
             scope.spawn(|| {
                 for _ in 0..2 {
                     let det = ImageDetector::headless().expect("an adapter was found above");
-                    let a = det.upload("a", &mesh).unwrap();
-                    let r = det
-                        .query(
-                            &mut ImageScratch::default(),
-                            &a,
-                            &Pose::IDENTITY,
-                            &a,
-                            &pose_b,
-                            &opts(64),
-                        )
-                        .unwrap();
-                    assert_eq!((r.interfering_pixels, r.volume), want);
-                    drop(a);
+                    assert_eq!(answer(&det), want);
                     drop(det);
                 }
             });
