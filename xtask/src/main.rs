@@ -304,6 +304,7 @@ mod tests {
         ];
         for dir in [
             "docs",
+            "docs/performance",
             "testdata/bench",
             "fuzz",
             "crates/frcd-obb",
