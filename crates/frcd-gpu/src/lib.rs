@@ -135,13 +135,43 @@ pub struct AdapterOptions {
 
 /// A headless adapter (no surface).
 pub fn request_adapter(options: &AdapterOptions) -> Result<wgpu::Adapter, SetupError> {
-    let _creating = creation_lock();
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
     if let Some(b) = options.backends {
         desc.backends = b;
     }
+    pick_adapter(desc, *options == AdapterOptions::default(), options)
+}
+
+/// A headless adapter on an instance the caller describes (its backends, flags, ...), for
+/// crates whose API takes a `wgpu::InstanceDescriptor`; `options.backends` is not read (set
+/// `desc.backends`). With `low_power` and `force_fallback_adapter` unset, the adapter that
+/// `WGPU_ADAPTER_NAME` names when it is set, else wgpu's default choice (`WGPU_POWER_PREF`
+/// honoured), as [`request_adapter`] with default options.
+///
+/// ```
+/// let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+/// desc.backends = wgpu::Backends::empty();
+/// let none = frcd_gpu::request_adapter_on(desc, &frcd_gpu::AdapterOptions::default());
+/// assert!(matches!(none, Err(frcd_gpu::SetupError::NoAdapter(_))));
+/// ```
+pub fn request_adapter_on(
+    desc: wgpu::InstanceDescriptor,
+    options: &AdapterOptions,
+) -> Result<wgpu::Adapter, SetupError> {
+    let from_env = !options.low_power && !options.force_fallback_adapter;
+    pick_adapter(desc, from_env, options)
+}
+
+/// The adapter of a new instance `desc`: by the wgpu environment variables (`from_env`), else by
+/// `options`' power preference and fallback flag.
+fn pick_adapter(
+    desc: wgpu::InstanceDescriptor,
+    from_env: bool,
+    options: &AdapterOptions,
+) -> Result<wgpu::Adapter, SetupError> {
+    let _creating = creation_lock();
     let instance = wgpu::Instance::new(desc);
-    if *options == AdapterOptions::default() {
+    if from_env {
         return pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
             &instance, None,
         ))

@@ -71,18 +71,12 @@ impl ImageContext {
         Self::headless_with(desc)
     }
 
-    /// A device on the first adapter the instance described by `desc` offers (e.g. with
-    /// `backends` restricted to `wgpu::Backends::VULKAN`).
+    /// A device on an adapter of the instance described by `desc` (e.g. with `backends`
+    /// restricted to `wgpu::Backends::VULKAN`): the one `WGPU_ADAPTER_NAME` names when it is
+    /// set, else wgpu's default choice; set up through `frcd_gpu` as frcd-gpgpu's context is.
     pub fn headless_with(desc: wgpu::InstanceDescriptor) -> Result<Self, ImageError> {
-        let _creating = frcd_gpu::creation_lock();
-        let instance = wgpu::Instance::new(desc);
-        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::HighPerformance,
-            force_fallback_adapter: false,
-            compatible_surface: None,
-            ..Default::default()
-        }))
-        .map_err(|e| ImageError::NoAdapter(e.to_string()))?;
+        let adapter = frcd_gpu::request_adapter_on(desc, &frcd_gpu::AdapterOptions::default())
+            .map_err(|e| ImageError::NoAdapter(driver_reason(&e)))?;
         let info = adapter.get_info();
         if info.backend == wgpu::Backend::Gl {
             return Err(ImageError::UnsupportedBackend {
@@ -105,15 +99,15 @@ impl ImageContext {
                 reason: "adapter has no compute shaders".into(),
             });
         }
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("frcd-image"),
-            required_features: Self::required_features(),
-            required_limits: Self::required_limits(&adapter.limits()),
-            ..Default::default()
-        }))
+        let (device, queue) = frcd_gpu::request_device(
+            &adapter,
+            "frcd-image",
+            Self::required_features(),
+            Self::required_limits(&adapter.limits()),
+        )
         .map_err(|e| ImageError::DeviceRequest {
             adapter: info.name.clone(),
-            reason: e.to_string(),
+            reason: driver_reason(&e),
         })?;
         Self::check(&device)?;
         log::info!(
@@ -199,4 +193,20 @@ impl ImageContext {
             Some(wgpu::DeviceType::Cpu)
         )
     }
+}
+
+/// What the driver said (the setup error's source and its sources, "a: b"): the variant of
+/// [`ImageError`] it goes into already says which step failed, and on which adapter.
+fn driver_reason(e: &frcd_gpu::SetupError) -> String {
+    let Some(first) = std::error::Error::source(e) else {
+        return e.to_string();
+    };
+    let mut out = first.to_string();
+    let mut next = first.source();
+    while let Some(s) = next {
+        out.push_str(": ");
+        out.push_str(&s.to_string());
+        next = s.source();
+    }
+    out
 }
