@@ -144,9 +144,9 @@ pub fn request_adapter(options: &AdapterOptions) -> Result<wgpu::Adapter, SetupE
 
 /// A headless adapter on an instance the caller describes (its backends, flags, ...), for
 /// crates whose API takes a `wgpu::InstanceDescriptor`; `options.backends` is not read (set
-/// `desc.backends`). With `low_power` and `force_fallback_adapter` unset, the adapter that
-/// `WGPU_ADAPTER_NAME` names when it is set, else wgpu's default choice (`WGPU_POWER_PREF`
-/// honoured), as [`request_adapter`] with default options.
+/// `desc.backends`). With `low_power` and `force_fallback_adapter` unset, the first adapter
+/// whose name contains `WGPU_ADAPTER_NAME` when that is set, else wgpu's choice for
+/// `WGPU_POWER_PREF` (no preference when unset), as [`request_adapter`] with default options.
 ///
 /// ```
 /// let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();

@@ -72,8 +72,9 @@ impl ImageContext {
     }
 
     /// A device on an adapter of the instance described by `desc` (e.g. with `backends`
-    /// restricted to `wgpu::Backends::VULKAN`): the one `WGPU_ADAPTER_NAME` names when it is
-    /// set, else wgpu's default choice; set up through `frcd_gpu` as frcd-gpgpu's context is.
+    /// restricted to `wgpu::Backends::VULKAN`): the first whose name contains
+    /// `WGPU_ADAPTER_NAME` when that is set, else wgpu's choice for `WGPU_POWER_PREF` (no
+    /// preference when unset); set up through `frcd_gpu` as frcd-gpgpu's context is.
     pub fn headless_with(desc: wgpu::InstanceDescriptor) -> Result<Self, ImageError> {
         let adapter = frcd_gpu::request_adapter_on(desc, &frcd_gpu::AdapterOptions::default())
             .map_err(|e| ImageError::NoAdapter(driver_reason(&e)))?;
