@@ -43,7 +43,9 @@
 //! - `FRCD_BENCH_HOT=3,17,...` times plain first contact on those steps alone, each repeated
 //!   200 times back to back (data hot in the caches), before the per-step pass: set against
 //!   the per-step pass (the sequence's order, caches as the previous step left them) it shows
-//!   what memory costs.
+//!   what memory costs;
+//! - `FRCD_BENCH_PAIR=NAME` keeps only the scenes whose name contains `NAME` (one CAD pair,
+//!   e.g. `cad_fandisk`), for a profiler or callgrind on one pair.
 
 #[path = "common/cad.rs"]
 mod cad;
@@ -633,8 +635,13 @@ fn bench_pairs(c: &mut Criterion) {
     if want("knots_slow") {
         list.push((scenes::knots_slow_rotation(200), 10));
     }
+    // FRCD_BENCH_PAIR=NAME keeps only the scenes whose name contains NAME (one CAD pair).
+    let pair = std::env::var("FRCD_BENCH_PAIR").unwrap_or_default();
     for (scene, stride) in list {
         let name = scene.name.clone();
+        if !name.contains(&pair) {
+            continue;
+        }
         let p = prepare(scene, &opts);
         if profile_loop(&p) {
             continue;
