@@ -89,6 +89,75 @@ pub struct Opts {
     /// empty: skipped.
     #[arg(long = "checker-parts", value_name = "N,..", value_delimiter = ',')]
     pub checker: Vec<usize>,
+    /// Time every GPU pass of the batches with GPU timestamps (where the adapter has
+    /// timestamps inside passes) for the breakdown table; the host's split (waiting for the
+    /// GPU, the CPU's re-decision) is always written.
+    #[arg(long)]
+    pub pass_timers: bool,
+}
+
+/// Where the time of one row's batches went: medians over the timed batches.
+struct Breakdown {
+    what: String,
+    body_pairs: usize,
+    /// Triangle pairs the GPU reported (touching or uncertain), all re-decided on the CPU.
+    reported: usize,
+    uncertain: usize,
+    batch_ms: f64,
+    wait_ms: f64,
+    decide_ms: f64,
+    /// GPU chain, its traversal levels, its triangle pass (pass timers only).
+    gpu_ms: Option<[f64; 3]>,
+}
+
+impl Breakdown {
+    fn new(
+        what: String,
+        batch_ms: f64,
+        got: &frcd_gpgpu::GpuBatch,
+        samples: &[frcd_gpgpu::BatchTimings],
+    ) -> Self {
+        let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+        let med = |f: &dyn Fn(&frcd_gpgpu::BatchTimings) -> f64| {
+            let mut v: Vec<f64> = samples.iter().map(f).collect();
+            v.sort_by(f64::total_cmp);
+            v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+        };
+        let timed = samples.iter().all(|t| t.gpu_total.is_some()) && !samples.is_empty();
+        Self {
+            what,
+            body_pairs: got.results.len(),
+            reported: got
+                .results
+                .iter()
+                .map(|r| r.gpu_decided + r.gpu_refuted + r.uncertain)
+                .sum(),
+            uncertain: got.results.iter().map(|r| r.uncertain).sum(),
+            batch_ms,
+            wait_ms: med(&|t| ms(t.wait)),
+            decide_ms: med(&|t| ms(t.decide)),
+            gpu_ms: timed.then(|| {
+                [
+                    med(&|t| ms(t.gpu_total.unwrap_or_default())),
+                    med(&|t| t.gpu_levels.iter().map(|&d| ms(d)).sum()),
+                    med(&|t| ms(t.gpu_triangles.unwrap_or_default())),
+                ]
+            }),
+        }
+    }
+
+    fn line(&self) -> String {
+        let gpu = match self.gpu_ms {
+            Some([all, lv, tr]) => {
+                format!("GPU chain {all:.2} ms (levels {lv:.2}, triangles {tr:.2})")
+            }
+            None => "no pass timers".into(),
+        };
+        format!(
+            "{}: batch {:.2} ms = wait {:.2} ms ({gpu}) + CPU re-decision {:.2} ms of {} reported pairs ({} uncertain)",
+            self.what, self.batch_ms, self.wait_ms, self.decide_ms, self.reported, self.uncertain
+        )
+    }
 }
 
 /// Median wall time in ms of `runs` calls (after one warm-up call).
@@ -274,7 +343,15 @@ pub fn run(mut o: Opts) -> Result<()> {
         o.frames.clear();
     }
     let load_start = load_average();
-    let ctx = GpuContext::headless().context("bench gpgpu needs a GPU adapter")?;
+    let mut ctx = GpuContext::headless_with(&frcd_gpgpu::HeadlessOptions {
+        pass_timers: o.pass_timers,
+        ..Default::default()
+    })
+    .context("bench gpgpu needs a GPU adapter")?;
+    if o.pass_timers && !ctx.has_pass_timers() {
+        println!("pass timers asked for, but the adapter has no timestamps inside passes");
+    }
+    let mut breakdowns: Vec<Breakdown> = Vec::new();
     let info = ctx.adapter_info().clone();
     let threads = rayon::current_num_threads();
     let request = Request {
@@ -344,12 +421,47 @@ pub fn run(mut o: Opts) -> Result<()> {
                 bail!("level {level}: the batch differs from the CPU on body pair {k}");
             }
         }
+        let mut samples = Vec::new();
         let gpu_batch = median_ms(o.runs, || {
-            std::hint::black_box(
-                ctx.collide_batch(&batch, &mut scratch)
-                    .expect("checked above"),
-            );
+            let got = ctx
+                .collide_batch(&batch, &mut scratch)
+                .expect("checked above");
+            samples.push(got.timings.clone());
+            std::hint::black_box(got);
         });
+        let b = Breakdown::new(
+            format!("pair batch, level {level}"),
+            gpu_batch,
+            &got,
+            &samples,
+        );
+        println!("{}", b.line());
+        breakdowns.push(b);
+        // The same batch re-deciding only the uncertain pairs: checked equal, then timed.
+        ctx.set_recheck(frcd_gpgpu::Recheck::Uncertain);
+        let trusted = ctx.collide_batch(&batch, &mut scratch)?;
+        for (k, (pa, pb)) in poses.iter().enumerate() {
+            if trusted.results[k].pairs != collide(&tree, pa, &tree, pb, &request).pairs {
+                bail!("level {level}: Recheck::Uncertain differs from the CPU on body pair {k}");
+            }
+        }
+        let mut samples = Vec::new();
+        let trusted_ms = median_ms(o.runs, || {
+            let got = ctx
+                .collide_batch(&batch, &mut scratch)
+                .expect("checked above");
+            samples.push(got.timings.clone());
+            std::hint::black_box(got);
+        });
+        ctx.set_recheck(frcd_gpgpu::Recheck::All);
+        let b = Breakdown::new(
+            format!("pair batch, level {level}, `Recheck::Uncertain`"),
+            trusted_ms,
+            &trusted,
+            &samples,
+        );
+        println!("{}", b.line());
+        breakdowns.push(b);
         println!(
             "level {level}: {} triangles/body, {touching} pairs, cpu1 {cpu1:.2} ms, cpu{threads} {cpu_all:.2} ms, gpu {gpu:.2} ms, gpu batch {gpu_batch:.2} ms",
             mesh.triangle_count()
@@ -423,6 +535,7 @@ pub fn run(mut o: Opts) -> Result<()> {
             });
         });
         f = 0;
+        let (mut samples, mut last) = (Vec::new(), None);
         let gpu = median_ms(o.runs, || {
             let poses = &frames[f % nf];
             f += 1;
@@ -431,8 +544,20 @@ pub fn run(mut o: Opts) -> Result<()> {
                 .iter()
                 .map(|&(i, j)| (&gpu_unique[i % 4], &poses[i], &gpu_unique[j % 4], &poses[j]))
                 .collect();
-            std::hint::black_box(ctx.collide_batch(&batch, &mut scratch).expect("checked"));
+            let got = ctx.collide_batch(&batch, &mut scratch).expect("checked");
+            samples.push(got.timings.clone());
+            last = Some(got);
         });
+        if let Some(got) = &last {
+            let b = Breakdown::new(
+                format!("frame, {n} parts (last frame's counts)"),
+                gpu,
+                got,
+                &samples,
+            );
+            println!("{}", b.line());
+            breakdowns.push(b);
+        }
         println!(
             "frame of {n} parts ({triangles} triangles): {:.1} candidates, {:.1} touching body pairs / frame, cpu1 {cpu1:.2} ms, cpu{threads} {cpu_all:.2} ms, gpu {gpu:.2} ms",
             candidates as f64 / nf as f64,
@@ -665,6 +790,38 @@ pub fn run(mut o: Opts) -> Result<()> {
             &gpu,
         );
         writeln!(md, "\n- {c1}\n- {cn}\n")?;
+    }
+    if !breakdowns.is_empty() {
+        writeln!(
+            md,
+            "## Where a batch's time goes (medians of the timed batches above)\n\n\
+             Wait: from the submission until the answer is on the host (GPU work, copy, map). \
+             GPU columns: GPU timestamps around the passes ({}). Re-decision: the CPU's exact \
+             test of every triangle pair the GPU reported (touching or uncertain; rows marked `Recheck::Uncertain`: \
+             the uncertain ones only), then the sort of each answer.\n",
+            if ctx.has_pass_timers() {
+                "`--pass-timers`"
+            } else {
+                "not taken: run with `--pass-timers` on an adapter with timestamps inside passes"
+            }
+        )?;
+        writeln!(
+            md,
+            "| batch | body pairs | reported triangle pairs | of which uncertain | batch ms | wait ms | GPU chain ms | GPU traversal levels ms | GPU triangle pass ms | CPU re-decision ms |"
+        )?;
+        writeln!(md, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+        for b in &breakdowns {
+            let [all, lv, tr] = match b.gpu_ms {
+                Some(g) => g.map(|x| format!("{x:.2}")),
+                None => ["—", "—", "—"].map(String::from),
+            };
+            writeln!(
+                md,
+                "| {} | {} | {} | {} | {:.2} | {:.2} | {all} | {lv} | {tr} | {:.2} |",
+                b.what, b.body_pairs, b.reported, b.uncertain, b.batch_ms, b.wait_ms, b.decide_ms
+            )?;
+        }
+        writeln!(md)?;
     }
     let checker_start = md.len();
     if !checker_rows.is_empty() {

@@ -42,6 +42,10 @@ pub fn requirements() -> wgpu::Limits {
     }
 }
 
+/// The device features GPU pass timers need.
+pub(crate) const PASS_TIMER_FEATURES: wgpu::Features =
+    wgpu::Features::TIMESTAMP_QUERY.union(wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES);
+
 /// Options of [`GpuContext::headless`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct HeadlessOptions {
@@ -54,6 +58,33 @@ pub struct HeadlessOptions {
     pub backends: Option<wgpu::Backends>,
     /// Shape of the mesh arena.
     pub arena: crate::ArenaOptions,
+    /// Ask for GPU timestamps and time every pass of a batch ([`crate::BatchTimings`]); where
+    /// the adapter offers no timestamps inside passes the context is made without them
+    /// ([`GpuContext::has_pass_timers`] says which). Off by default: a profiling aid.
+    pub pass_timers: bool,
+    /// Which reported triangle pairs the CPU re-decides exactly ([`Recheck`]).
+    pub recheck: Recheck,
+}
+
+/// Which triangle pairs the GPU reports the CPU re-decides with the exact test.
+///
+/// The GPU reports a pair as *touching* only when every sign it used exceeds an error bound
+/// derived for any conforming WGSL implementation (either rounding direction, fused
+/// multiply-adds, flush-to-zero; the derivation is beside `tri_tri` in `shaders/traverse.wgsl`,
+/// checked by `emulate.rs` under every rounding mode), and as *uncertain* otherwise. On a real
+/// GPU the CPU's exact test of the reported pairs is most of a large batch's time (an H200: 13 of
+/// 16 ms at 1.3M triangles per body on one thread), mostly cache misses fetching both triangles.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Recheck {
+    /// Every reported pair, touching or uncertain (the default): a driver that breaks WGSL's float
+    /// rules, or a bug, cannot add a pair ([`crate::GpuCollision::gpu_refuted`] counts what the
+    /// exact test dropped).
+    #[default]
+    All,
+    /// Only the pairs the GPU flagged uncertain; its *touching* pairs are taken as certified by
+    /// the bounds (`gpu_refuted` stays 0). Faster where many pairs touch; trusts the driver's
+    /// conformance.
+    Uncertain,
 }
 
 /// The compute pipelines and layouts, made once per context.
@@ -88,6 +119,10 @@ pub struct GpuContext {
     pub(crate) id: u64,
     submissions: AtomicU64,
     readbacks: AtomicU64,
+    /// Batches record GPU timestamps around every pass (see [`GpuContext::enable_pass_timers`]).
+    pub(crate) pass_timers: bool,
+    /// Which reported pairs the CPU re-decides.
+    pub(crate) recheck: Recheck,
     /// Last field: the GPU objects above are dropped under `frcd_gpu::creation_lock` (see the
     /// `Drop` impl).
     _release: frcd_gpu::ReleaseCreationLock,
@@ -184,16 +219,25 @@ impl GpuContext {
         check_downlevel(&adapter.get_downlevel_capabilities(), &info.name)?;
         let limits = adapter.limits();
         check_limits(&limits, &info.name)?;
-        let (device, queue) =
-            frcd_gpu::request_device(&adapter, "frcd-gpgpu", wgpu::Features::empty(), limits)
-                .map_err(setup_error)?;
+        let features = if options.pass_timers {
+            adapter.features() & PASS_TIMER_FEATURES
+        } else {
+            wgpu::Features::empty()
+        };
+        let (device, queue) = frcd_gpu::request_device(&adapter, "frcd-gpgpu", features, limits)
+            .map_err(setup_error)?;
         log::info!(
             "frcd-gpgpu: adapter '{}' ({:?}, {:?})",
             info.name,
             info.backend,
             info.device_type
         );
-        Self::from_device_with(device, queue, &options.arena)
+        let mut ctx = Self::from_device_with(device, queue, &options.arena)?;
+        if options.pass_timers {
+            ctx.enable_pass_timers();
+        }
+        ctx.recheck = options.recheck;
+        Ok(ctx)
     }
 
     /// A context on the caller's device and queue (an engine's own). The device's limits are
@@ -248,6 +292,8 @@ impl GpuContext {
             id: NEXT_CONTEXT_ID.fetch_add(1, Ordering::Relaxed),
             submissions: AtomicU64::new(0),
             readbacks: AtomicU64::new(0),
+            pass_timers: false,
+            recheck: Recheck::All,
             _release: frcd_gpu::ReleaseCreationLock::default(),
         })
     }
@@ -285,6 +331,31 @@ impl GpuContext {
         &self.limits
     }
 
+    /// Turns on GPU pass timers ([`crate::BatchTimings`]'s `gpu_*` fields) when the device was
+    /// created with [`wgpu::Features::TIMESTAMP_QUERY`] and
+    /// [`wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES`]; returns whether they are on. Each
+    /// batch then writes a timestamp before and after every pass and reads them back with its
+    /// answer (a few hundred bytes).
+    pub fn enable_pass_timers(&mut self) -> bool {
+        self.pass_timers = self.device.features().contains(PASS_TIMER_FEATURES);
+        self.pass_timers
+    }
+
+    /// Sets which reported triangle pairs the CPU re-decides ([`Recheck::All`] by default).
+    pub fn set_recheck(&mut self, recheck: Recheck) {
+        self.recheck = recheck;
+    }
+
+    /// Which reported triangle pairs the CPU re-decides.
+    pub fn recheck(&self) -> Recheck {
+        self.recheck
+    }
+
+    /// Whether batches time their GPU passes ([`GpuContext::enable_pass_timers`]).
+    pub fn has_pass_timers(&self) -> bool {
+        self.pass_timers
+    }
+
     /// True when the adapter is a software rasterizer (lavapipe, llvmpipe, WARP).
     pub fn is_software(&self) -> bool {
         self.info.device_type == wgpu::DeviceType::Cpu
@@ -318,6 +389,19 @@ impl GpuContext {
     ) -> Result<Vec<u8>, GpuError> {
         self.readbacks.fetch_add(1, Ordering::Relaxed);
         frcd_gpu::read_back(&self.device, staging, len, index).map_err(GpuError::Readback)
+    }
+
+    /// [`GpuContext::read_back`] without the copy: `read` gets the mapped bytes in place.
+    pub(crate) fn read_back_with<R>(
+        &self,
+        staging: &wgpu::Buffer,
+        len: u64,
+        index: wgpu::SubmissionIndex,
+        read: impl FnOnce(&[u8]) -> R,
+    ) -> Result<R, GpuError> {
+        self.readbacks.fetch_add(1, Ordering::Relaxed);
+        frcd_gpu::read_back_with(&self.device, staging, len, index, read)
+            .map_err(GpuError::Readback)
     }
 
     /// Largest byte size of one storage buffer binding.

@@ -65,10 +65,12 @@ pub mod shaders;
 mod sweep;
 
 pub use boxes::{BodyPairs, BoxScratch};
-pub use context::{GpuContext, HeadlessOptions, requirements};
+pub use context::{GpuContext, HeadlessOptions, Recheck, requirements};
 pub use error::GpuError;
 pub use mesh::{ArenaOptions, GpuMesh, MAX_LEAF_TRIANGLES};
 pub use pack::{MAX_MAGNITUDE, TexLayout};
-pub use query::{BodyPair, GpuBatch, GpuCollision, PendingBatch, QueryScratch, SubmittedBatch};
+pub use query::{
+    BatchTimings, BodyPair, GpuBatch, GpuCollision, PendingBatch, QueryScratch, SubmittedBatch,
+};
 /// The wgpu this crate is built on (to create a device for [`GpuContext::from_device`]).
 pub use wgpu;

@@ -17,6 +17,11 @@ const PARAMS_BYTES: u64 = std::mem::size_of::<Params>() as u64;
 const PAIR_BYTES: u64 = std::mem::size_of::<PairInfo>() as u64;
 /// Re-runs allowed after overflows before giving up (each at least doubles a buffer).
 const MAX_RERUNS: u32 = 32;
+/// Timestamps one batch may write with pass timers on: pass start, after `init`, after each
+/// level, after the triangle pass. A deeper batch (levels + 3 above this) is not timed.
+const MAX_TIMERS: u32 = 64;
+/// Bytes of the timestamps in the staging buffer (between the state and the output).
+const TIMER_BYTES: u64 = MAX_TIMERS as u64 * 8;
 
 /// The answer for one body pair ([`GpuContext::collide`], or one entry of
 /// [`GpuBatch::results`]).
@@ -25,7 +30,8 @@ pub struct GpuCollision {
     /// Every touching triangle pair `(tri_a, tri_b)` (input-mesh indices), sorted ascending:
     /// equal to the exact oracle's answer (surface mode).
     pub pairs: Vec<(u32, u32)>,
-    /// Pairs the GPU decided as touching and the CPU's exact re-check confirmed.
+    /// Pairs the GPU decided as touching and the CPU's exact re-check confirmed (with
+    /// [`crate::Recheck::Uncertain`]: taken without a re-check).
     pub gpu_decided: usize,
     /// Pairs the GPU decided as touching that the CPU's exact re-check found disjoint (dropped
     /// from [`GpuCollision::pairs`]; 0 unless a driver breaks the certified bounds).
@@ -69,6 +75,46 @@ pub struct GpuBatch {
     pub readbacks: u32,
     /// Re-runs after an overflow.
     pub reruns: u32,
+    /// Where the batch's time went (wall-clock on the host; GPU passes with pass timers).
+    pub timings: BatchTimings,
+}
+
+/// Where a batch's time went. The host times are wall-clock; the `gpu_*` times come from GPU
+/// timestamps and are only filled when the context has pass timers
+/// ([`GpuContext::enable_pass_timers`], [`crate::HeadlessOptions::pass_timers`]).
+///
+/// ```no_run
+/// # fn main() -> Result<(), frcd_gpgpu::GpuError> {
+/// let ctx = frcd_gpgpu::GpuContext::headless_with(&frcd_gpgpu::HeadlessOptions {
+///     pass_timers: true,
+///     ..Default::default()
+/// })?;
+/// # let batch: Vec<frcd_gpgpu::BodyPair<'_>> = Vec::new();
+/// let mut scratch = frcd_gpgpu::QueryScratch::default();
+/// let t = ctx.collide_batch(&batch, &mut scratch)?.timings;
+/// println!(
+///     "waited {:?} (GPU: levels {:?}, triangles {:?}), CPU re-decision {:?}",
+///     t.wait, t.gpu_levels, t.gpu_triangles, t.decide
+/// );
+/// # Ok(()) }
+/// ```
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct BatchTimings {
+    /// From the start of the readback (just after frcd-gpgpu's submission, or when
+    /// [`PendingBatch::resolve`] is called) until the answer's bytes are on the host: the GPU
+    /// work, the copy and the map; summed over overflow re-runs.
+    pub wait: std::time::Duration,
+    /// The CPU's part after the readback: decoding, the exact re-decision of every reported
+    /// triangle pair, sorting.
+    pub decide: std::time::Duration,
+    /// GPU time of each traversal level (the level's test and the next level's arguments), in
+    /// order; empty without pass timers. Levels past the last with work take almost nothing.
+    pub gpu_levels: Vec<std::time::Duration>,
+    /// GPU time of the triangle pass (its arguments and the tests); `None` without pass timers.
+    pub gpu_triangles: Option<std::time::Duration>,
+    /// GPU time of the whole dispatch chain, first timestamp to last; `None` without pass
+    /// timers.
+    pub gpu_total: Option<std::time::Duration>,
 }
 
 /// One body pair of a batch: `(mesh_a, pose_a, mesh_b, pose_b)`.
@@ -87,6 +133,10 @@ struct Buffers {
     params: wgpu::Buffer,
     pairs: wgpu::Buffer,
     staging: wgpu::Buffer,
+    /// Pass timers: the timestamp queries and the buffer they resolve into.
+    timers: Option<(wgpu::QuerySet, wgpu::Buffer)>,
+    /// Byte offset of the output in the staging buffer (after the state and the timestamps).
+    out_offset: u64,
     trav_bg: [wgpu::BindGroup; 2],
     /// The triangle pass: triangle list in, output out.
     tri_bg: wgpu::BindGroup,
@@ -152,6 +202,7 @@ impl QueryScratch {
                 && b.output_cap == self.output_cap
                 && b.tri_cap == self.tri_cap
                 && b.pair_cap == self.pair_cap
+                && b.timers.is_some() == ctx.pass_timers
             {
                 return Ok(());
             }
@@ -189,9 +240,23 @@ impl QueryScratch {
         let tris = buf("frcd-gpgpu triangle list", tsize, B::STORAGE);
         let params = buf("frcd-gpgpu params", PARAMS_BYTES, B::UNIFORM | B::COPY_DST);
         let pairs = buf("frcd-gpgpu pair table", psize, B::STORAGE | B::COPY_DST);
+        let timers = ctx.pass_timers.then(|| {
+            let set = d.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("frcd-gpgpu pass timers"),
+                ty: wgpu::QueryType::Timestamp,
+                count: MAX_TIMERS,
+            });
+            let resolved = buf(
+                "frcd-gpgpu pass timers",
+                TIMER_BYTES,
+                B::QUERY_RESOLVE | B::COPY_SRC,
+            );
+            (set, resolved)
+        });
+        let out_offset = STATE_BYTES + if timers.is_some() { TIMER_BYTES } else { 0 };
         let staging = buf(
             "frcd-gpgpu staging",
-            STATE_BYTES + osize,
+            out_offset + osize,
             B::MAP_READ | B::COPY_DST,
         );
         let trav = |input: &wgpu::Buffer, output: &wgpu::Buffer, list: &wgpu::Buffer| {
@@ -237,6 +302,8 @@ impl QueryScratch {
             params,
             pairs,
             staging,
+            timers,
+            out_offset,
             trav_bg,
             tri_bg,
             ctrl_bg,
@@ -258,6 +325,98 @@ struct Prepared {
     levels: u32,
     /// Most triangle pairs one leaf pair of the batch lists.
     leaf_pairs: u64,
+}
+
+/// One reported triangle pair after the CPU's exact test.
+struct Decided {
+    k: u32,
+    ia: u32,
+    ib: u32,
+    /// The GPU flagged it uncertain (else the GPU said touching).
+    uncertain: bool,
+    /// The exact test's answer.
+    touch: bool,
+}
+
+/// Reported pairs below which the re-decision stays on the calling thread. Measured on an H200's
+/// 16-core host: at 2,755 pairs the pool's hand-off and the other cores' cold caches made the
+/// re-decision slower than one thread (0.40-0.50 against 0.42 ms), at 5,882 faster (0.55
+/// against 0.84 ms).
+#[cfg(feature = "parallel")]
+const PARALLEL_DECISIONS: usize = 4096;
+
+/// Decides every reported entry `(pair, tri_a, tri_b | uncertain flag, _)` with the exact test;
+/// with the `parallel` feature, large batches on rayon's pool (the answer's order is kept).
+fn decide_all(
+    p: &Prepared,
+    entries: &[u32],
+    recheck: crate::Recheck,
+) -> Result<Vec<Decided>, GpuError> {
+    let decide = |e: &[u32]| -> Result<Decided, GpuError> {
+        let (k, ia, tag) = (e[0], e[1], e[2]);
+        let ib = tag & !UNCERTAIN_FLAG;
+        let (Some(frame), Some((ta, tb))) = (p.frames.get(k as usize), p.tris.get(k as usize))
+        else {
+            return Err(GpuError::Internal(format!("pair index {k} out of range")));
+        };
+        if ia as usize >= ta.triangle_count() || ib as usize >= tb.triangle_count() {
+            return Err(GpuError::Internal(format!(
+                "pair {k}: triangle pair ({ia}, {ib}) out of range"
+            )));
+        }
+        let uncertain = tag & UNCERTAIN_FLAG != 0;
+        // With Recheck::All the GPU's "touching" is not trusted either (WGSL's float rules, a
+        // driver bug); the exact test's filter decides most pairs in floats, but fetching both
+        // triangles misses the cache.
+        let touch = if uncertain || recheck == crate::Recheck::All {
+            let (ta, tb) = (ta.triangle(ia as usize), tb.triangle(ib as usize));
+            frcd_tritri::intersects(Method::Exact, &ta, &frame.triangle(&tb))
+        } else {
+            true
+        };
+        Ok(Decided {
+            k,
+            ia,
+            ib,
+            uncertain,
+            touch,
+        })
+    };
+    #[cfg(feature = "parallel")]
+    if entries.len() / 4 >= PARALLEL_DECISIONS {
+        use rayon::prelude::*;
+        return entries.par_chunks_exact(4).map(decide).collect();
+    }
+    entries.chunks_exact(4).map(decide).collect()
+}
+
+/// Sorts every answer's pairs (rayon's pool for large batches with the `parallel` feature);
+/// a pair reported twice is an internal error.
+fn sort_pairs(results: &mut [GpuCollision], reported: usize) -> Result<(), GpuError> {
+    let sort = |r: &mut GpuCollision| -> Result<(), GpuError> {
+        r.pairs.sort_unstable();
+        let before = r.pairs.len();
+        r.pairs.dedup();
+        if r.pairs.len() != before {
+            return Err(GpuError::Internal(
+                "a triangle pair was reported twice".into(),
+            ));
+        }
+        Ok(())
+    };
+    #[cfg(feature = "parallel")]
+    if reported >= PARALLEL_DECISIONS {
+        use rayon::prelude::*;
+        return results.par_iter_mut().try_for_each(sort);
+    }
+    let _ = reported;
+    results.iter_mut().try_for_each(sort)
+}
+
+/// Timestamps a batch writes with pass timers on (0: too deep to time).
+fn timer_count(p: &Prepared) -> u32 {
+    let n = p.levels + 3;
+    if n <= MAX_TIMERS { n } else { 0 }
 }
 
 /// The relative pose as the shader's `PairInfo`: rows of R, then t (f32, rounded to nearest;
@@ -584,14 +743,22 @@ impl GpuContext {
             .unwrap_or_else(|e| e.into_inner())
             .bind
             .clone();
+        let timers = bufs.timers.as_ref().filter(|_| timer_count(p) > 0);
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("frcd-gpgpu traversal"),
                 timestamp_writes: None,
             });
+            let stamp = |pass: &mut wgpu::ComputePass<'_>, k: u32| {
+                if let Some((set, _)) = timers {
+                    pass.write_timestamp(set, k);
+                }
+            };
+            stamp(&mut pass, 0);
             pass.set_pipeline(&self.pipes.init);
             pass.set_bind_group(0, &bufs.ctrl_bg, &[]);
             pass.dispatch_workgroups(1, 1, 1);
+            stamp(&mut pass, 1);
             // Level k reads frontier k % 2.
             for level in 0..p.levels as usize {
                 pass.set_pipeline(&self.pipes.traverse);
@@ -601,6 +768,7 @@ impl GpuContext {
                 pass.set_pipeline(&self.pipes.prepare);
                 pass.set_bind_group(0, &bufs.ctrl_bg, &[]);
                 pass.dispatch_workgroups(1, 1, 1);
+                stamp(&mut pass, level as u32 + 2);
             }
             // Every listed triangle pair, one per invocation.
             pass.set_pipeline(&self.pipes.prepare_tris);
@@ -610,10 +778,16 @@ impl GpuContext {
             pass.set_bind_group(0, &arena_bg, &[]);
             pass.set_bind_group(1, &bufs.tri_bg, &[]);
             pass.dispatch_workgroups_indirect(&bufs.args, 0);
+            stamp(&mut pass, p.levels + 2);
         }
         enc.copy_buffer_to_buffer(&bufs.state, 0, &bufs.staging, 0, STATE_BYTES);
+        if let Some((set, resolved)) = timers {
+            let n = timer_count(p);
+            enc.resolve_query_set(set, 0..n, resolved, 0);
+            enc.copy_buffer_to_buffer(resolved, 0, &bufs.staging, STATE_BYTES, n as u64 * 8);
+        }
         let out_bytes = bufs.output_cap as u64 * ENTRY_BYTES;
-        enc.copy_buffer_to_buffer(&bufs.out, 0, &bufs.staging, STATE_BYTES, out_bytes);
+        enc.copy_buffer_to_buffer(&bufs.out, 0, &bufs.staging, bufs.out_offset, out_bytes);
         Ok(())
     }
 
@@ -626,7 +800,7 @@ impl GpuContext {
         answer: &mut GpuBatch,
         mut first: Option<wgpu::SubmissionIndex>,
     ) -> Result<GpuBatch, GpuError> {
-        let words = loop {
+        let (state, ticks, entries) = loop {
             let index = match first.take() {
                 Some(i) => i,
                 None => {
@@ -642,9 +816,31 @@ impl GpuContext {
             };
             let bufs = scratch.bufs.as_ref().expect("recorded");
             let out_bytes = bufs.output_cap as u64 * ENTRY_BYTES;
-            let bytes = self.read_back(&bufs.staging, STATE_BYTES + out_bytes, index)?;
+            let (out_offset, output_cap) = (bufs.out_offset as usize, bufs.output_cap);
+            let n_ticks = if bufs.timers.is_some() {
+                timer_count(p) as usize
+            } else {
+                0
+            };
+            let waited = std::time::Instant::now();
+            // Only the entries written are copied out of the mapped buffer, not the capacity.
+            let (state, ticks, entries) =
+                self.read_back_with(&bufs.staging, bufs.out_offset + out_bytes, index, |bytes| {
+                    let state: State = bytemuck::pod_read_unaligned(&bytes[..STATE_BYTES as usize]);
+                    let ticks: Vec<u64> =
+                        bytemuck::pod_collect_to_vec(&bytes[STATE_BYTES as usize..][..n_ticks * 8]);
+                    let written = if state.out <= output_cap {
+                        state.out as usize
+                    } else {
+                        0
+                    };
+                    let entries: Vec<u32> = bytemuck::pod_collect_to_vec(
+                        &bytes[out_offset..][..written * ENTRY_BYTES as usize],
+                    );
+                    (state, ticks, entries)
+                })?;
+            answer.timings.wait += waited.elapsed();
             answer.readbacks += 1;
-            let state: State = bytemuck::pod_read_unaligned(&bytes[..STATE_BYTES as usize]);
             let (cur, out_count, needed) = (state.cur, state.out, state.needed);
             let mut rerun = false;
             if needed > bufs.frontier_cap {
@@ -683,57 +879,37 @@ impl GpuContext {
             }
             answer.levels = state.levels;
             answer.node_pairs_tested = state.pairs_tested as u64;
-            break (state, bytes);
+            break (state, ticks, entries);
         };
-        let (state, bytes) = words;
-        let out_count = state.out as usize;
-        let entries: Vec<u32> = bytemuck::pod_collect_to_vec(
-            &bytes[STATE_BYTES as usize..][..out_count * ENTRY_BYTES as usize],
-        );
+        debug_assert_eq!(entries.len(), state.out as usize * 4);
+        if ticks.len() >= 3 {
+            let period = f64::from(self.queue.get_timestamp_period());
+            let span = |a: u64, b: u64| {
+                std::time::Duration::from_nanos((b.saturating_sub(a) as f64 * period) as u64)
+            };
+            let last = ticks.len() - 1;
+            answer.timings.gpu_levels = ticks[1..last]
+                .windows(2)
+                .map(|w| span(w[0], w[1]))
+                .collect();
+            answer.timings.gpu_triangles = Some(span(ticks[last - 1], ticks[last]));
+            answer.timings.gpu_total = Some(span(ticks[0], ticks[last]));
+        }
+        let deciding = std::time::Instant::now();
         let mut results = vec![GpuCollision::default(); p.frames.len()];
-        for e in entries.chunks_exact(4) {
-            let (k, ia, tag) = (e[0] as usize, e[1], e[2]);
-            let ib = tag & !UNCERTAIN_FLAG;
-            let (Some(frame), Some((ta, tb))) = (p.frames.get(k), p.tris.get(k)) else {
-                return Err(GpuError::Internal(format!("pair index {k} out of range")));
-            };
-            let (ta, tb) = match (ia as usize, ib as usize) {
-                (ia, ib) if ia < ta.triangle_count() && ib < tb.triangle_count() => {
-                    (ta.triangle(ia), tb.triangle(ib))
-                }
-                _ => {
-                    return Err(GpuError::Internal(format!(
-                        "pair {k}: triangle pair ({ia}, {ib}) out of range"
-                    )));
-                }
-            };
-            let r = &mut results[k];
-            // Every pair is re-decided exactly: the GPU's "touching" is not trusted (WGSL's
-            // float rules, a driver bug); the exact test's filter makes this a few hundred
-            // nanoseconds per reported pair, small next to the readback.
-            let touch = frcd_tritri::intersects(Method::Exact, &ta, &frame.triangle(&tb));
-            if tag & UNCERTAIN_FLAG == 0 {
-                if touch {
-                    r.gpu_decided += 1;
-                } else {
-                    r.gpu_refuted += 1;
-                }
-            } else {
-                r.uncertain += 1;
+        for d in decide_all(p, &entries, self.recheck)? {
+            let r = &mut results[d.k as usize];
+            match (d.uncertain, d.touch) {
+                (true, _) => r.uncertain += 1,
+                (false, true) => r.gpu_decided += 1,
+                (false, false) => r.gpu_refuted += 1,
             }
-            if touch {
-                r.pairs.push((ia, ib));
+            if d.touch {
+                r.pairs.push((d.ia, d.ib));
             }
         }
+        sort_pairs(&mut results, entries.len() / 4)?;
         for r in &mut results {
-            r.pairs.sort_unstable();
-            let before = r.pairs.len();
-            r.pairs.dedup();
-            if r.pairs.len() != before {
-                return Err(GpuError::Internal(
-                    "a triangle pair was reported twice".into(),
-                ));
-            }
             r.levels = answer.levels;
             r.node_pairs_tested = answer.node_pairs_tested;
             r.submissions = answer.submissions;
@@ -741,6 +917,7 @@ impl GpuContext {
             r.reruns = answer.reruns;
         }
         answer.results = results;
+        answer.timings.decide = deciding.elapsed();
         Ok(std::mem::take(answer))
     }
 }

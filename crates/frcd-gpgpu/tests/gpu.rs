@@ -418,6 +418,108 @@ fn a_frame_of_many_pairs_is_one_submission() {
     );
 }
 
+/// `Recheck::Uncertain`: the GPU's touching pairs are taken without the exact test, so the
+/// answers must still equal the oracle's (the bounds hold on this adapter), the counts of
+/// GPU-decided and uncertain pairs are the same as with `Recheck::All`, and nothing is refuted.
+#[test]
+fn rechecking_only_uncertain_pairs_gives_the_oracles_pairs() {
+    let Some(mut ctx) = new_context() else { return };
+    assert_eq!(ctx.recheck(), frcd_gpgpu::Recheck::All);
+    let a = body(&ctx, shapes::icosphere(1.0, 4));
+    let b = body(&ctx, shapes::torus(0.8, 0.25, 64, 24).expect("torus"));
+    let poses: Vec<Pose> = (0..12)
+        .map(|k| {
+            let s = k as f64 / 12.0;
+            Pose::new(
+                DVec3::new(0.5 + 0.6 * s, 0.2 - 0.3 * s, 0.1),
+                DQuat::from_rotation_y(3.0 * s),
+            )
+        })
+        .collect();
+    let batch: Vec<_> = poses
+        .iter()
+        .map(|p| (&a.gpu, &Pose::IDENTITY, &b.gpu, p))
+        .collect();
+    let mut scratch = QueryScratch::default();
+    let all = ctx.collide_batch(&batch, &mut scratch).unwrap();
+    ctx.set_recheck(frcd_gpgpu::Recheck::Uncertain);
+    let trusted = ctx.collide_batch(&batch, &mut scratch).unwrap();
+    let (mut decided, mut uncertain) = (0, 0);
+    for (k, p) in poses.iter().enumerate() {
+        let want = oracle::pairs(&a.mesh, &Pose::IDENTITY, &b.mesh, p);
+        assert_eq!(all.results[k].pairs, want, "pose {k}, Recheck::All");
+        assert_eq!(
+            trusted.results[k].pairs, want,
+            "pose {k}, Recheck::Uncertain"
+        );
+        let (x, y) = (&all.results[k], &trusted.results[k]);
+        assert_eq!(
+            (x.gpu_decided, x.gpu_refuted, x.uncertain),
+            (y.gpu_decided, 0, y.uncertain)
+        );
+        decided += y.gpu_decided;
+        uncertain += y.uncertain;
+    }
+    // Both kinds occur, so both paths of the re-decision ran.
+    assert!(decided > 0 && uncertain > 0, "{decided} {uncertain}");
+}
+
+/// Pass timers: with them, a batch reports one GPU time per traversal level, the triangle pass
+/// and the whole chain (consistent with each other), and the same pairs as without them
+/// (also after an overflow re-run, whose timestamps come from the last run). Without them the
+/// GPU fields stay empty; the host's wait and re-decision times are always filled.
+#[test]
+fn pass_timers_time_every_level_and_leave_the_answer_alone() {
+    let Some(plain) = new_context() else { return };
+    let timed = match GpuContext::headless_with(&HeadlessOptions {
+        pass_timers: true,
+        ..Default::default()
+    }) {
+        Ok(c) => c,
+        Err(e) => panic!("a context that could be made without timers fails with them: {e}"),
+    };
+    let a = shapes::icosphere(1.0, 3);
+    let b = shapes::torus(0.8, 0.25, 48, 16).expect("torus");
+    let pose_b = Pose::new(DVec3::new(0.7, 0.1, 0.0), DQuat::from_rotation_x(0.7));
+    let want = oracle::pairs(&a, &Pose::IDENTITY, &b, &pose_b);
+    assert!(!want.is_empty());
+    let run = |ctx: &GpuContext, scratch: &mut QueryScratch| {
+        let (ga, gb) = (body(ctx, a.clone()), body(ctx, b.clone()));
+        let batch = [(&ga.gpu, &Pose::IDENTITY, &gb.gpu, &pose_b)];
+        let depth = ga.gpu.depth().max(gb.gpu.depth());
+        (ctx.collide_batch(&batch, scratch).expect("batch"), depth)
+    };
+    let (untimed, _) = run(&plain, &mut QueryScratch::default());
+    assert_eq!(untimed.results[0].pairs, want);
+    assert!(untimed.timings.gpu_levels.is_empty());
+    assert_eq!(
+        (untimed.timings.gpu_triangles, untimed.timings.gpu_total),
+        (None, None)
+    );
+    assert!(untimed.timings.wait > std::time::Duration::ZERO);
+    assert!(untimed.timings.decide > std::time::Duration::ZERO);
+    // Tiny buffers: the first batch overflows and re-runs.
+    for mut scratch in [QueryScratch::with_capacity(2, 2), QueryScratch::default()] {
+        let (got, depth) = run(&timed, &mut scratch);
+        assert_eq!(got.results[0].pairs, want);
+        let t = &got.timings;
+        if !timed.has_pass_timers() {
+            println!("SKIP pass timers: the adapter has no timestamps inside passes");
+            assert!(t.gpu_levels.is_empty() && t.gpu_total.is_none());
+            return;
+        }
+        assert_eq!(t.gpu_levels.len(), depth as usize, "{t:?}");
+        println!("{t:?}");
+        let (tris, total) = (t.gpu_triangles.unwrap(), t.gpu_total.unwrap());
+        let parts: std::time::Duration = t.gpu_levels.iter().sum::<std::time::Duration>() + tris;
+        assert!(parts <= total, "{t:?}");
+        assert!(
+            total > std::time::Duration::ZERO && total <= t.wait,
+            "{t:?}"
+        );
+    }
+}
+
 /// Issue 10 item 3: recorded into the caller's encoder, submitted by the caller, resolved by
 /// waiting on that submission only.
 #[test]
