@@ -255,6 +255,18 @@ impl GpuContext {
         queue: wgpu::Queue,
         arena: &crate::ArenaOptions,
     ) -> Result<Self, GpuError> {
+        // Under the creation lock from the first check on, so a refused device (and the
+        // instance it may hold the last reference to) is released under it as well.
+        frcd_gpu::with_creation_lock((device, queue), |(device, queue)| {
+            Self::from_device_locked(device, queue, arena)
+        })
+    }
+
+    fn from_device_locked(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        arena: &crate::ArenaOptions,
+    ) -> Result<Self, GpuError> {
         let info = device.adapter_info();
         let limits = device.limits();
         check_limits(&limits, &info.name)?;
@@ -304,11 +316,13 @@ impl GpuContext {
         device: wgpu::Device,
         queue: wgpu::Queue,
     ) -> Result<Self, GpuError> {
-        check_downlevel(
-            &adapter.get_downlevel_capabilities(),
-            &adapter.get_info().name,
-        )?;
-        Self::from_device(device, queue)
+        frcd_gpu::with_creation_lock((device, queue), |(device, queue)| {
+            check_downlevel(
+                &adapter.get_downlevel_capabilities(),
+                &adapter.get_info().name,
+            )?;
+            Self::from_device(device, queue)
+        })
     }
 
     /// The device.

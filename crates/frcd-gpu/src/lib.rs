@@ -21,7 +21,9 @@ pub fn with_prelude(source: &str) -> String {
 /// H200 (driver 580.159), test binaries run on two threads, each test with its own context,
 /// stopped in 4 runs of 5 with the GPU idle and every thread in a futex wait (one backtrace:
 /// a thread in `vkDestroyDevice`); one thread at a time never hung. With creation under this
-/// lock, 0 of 6 such runs hung (1 of 3 at 16 threads still did, before drops were covered).
+/// lock, 0 of 6 such runs hung (1 of 3 at 16 threads still did, before drops were covered;
+/// 2 of 13 at 2 threads, before refused devices were dropped under it too, see
+/// [`with_creation_lock`]; then 0 of 28).
 /// wgpu issues 10010 and 10234 report crashes from the same pattern. frcd's GPU crates take
 /// this lock in every constructor and while their contexts are dropped; both are rare, so it
 /// costs nothing per frame. An engine creating or dropping its own devices or pipelines on
@@ -65,6 +67,28 @@ impl Drop for CreationGuard {
             HELD.with(|h| h.set(false));
         }
     }
+}
+
+/// Whether the calling thread holds [`creation_lock`].
+pub fn creation_lock_held() -> bool {
+    HELD.with(std::cell::Cell::get)
+}
+
+/// Runs `make` on `inputs` with [`creation_lock`] held throughout, so that whatever `make` does
+/// not keep is dropped under the lock too: a constructor that takes a caller's device and refuses
+/// it drops the device (and with its last reference the wgpu instance) inside `make`, before the
+/// lock is released. Checking a device *before* taking the lock and returning early dropped it
+/// outside: on an H200 that deadlocked in NVIDIA's driver against another thread's
+/// `vkDestroyDevice` (2 test runs in 13; backtraces in `docs/performance/gpu.md`).
+///
+/// ```
+/// let refused: Result<(), &str> =
+///     frcd_gpu::with_creation_lock(vec![1u8; 4], |_device| Err("limits too small"));
+/// assert!(refused.is_err() && !frcd_gpu::creation_lock_held());
+/// ```
+pub fn with_creation_lock<I, R>(inputs: I, make: impl FnOnce(I) -> R) -> R {
+    let _creating = creation_lock();
+    make(inputs)
 }
 
 /// Takes [`creation_lock`] for the rest of a value's drop. Call it first thing in the value's
@@ -279,6 +303,32 @@ pub fn read_back_with<R>(
 mod lock_tests {
     use super::*;
     use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+    /// Records whether the creation lock was held when it was dropped.
+    struct DropProbe(std::rc::Rc<std::cell::Cell<Option<bool>>>);
+
+    impl Drop for DropProbe {
+        fn drop(&mut self) {
+            self.0.set(Some(creation_lock_held()));
+        }
+    }
+
+    #[test]
+    fn inputs_a_constructor_refuses_are_dropped_under_the_lock() {
+        let seen = std::rc::Rc::new(std::cell::Cell::new(None));
+        assert!(!creation_lock_held());
+        let refused: Result<(), &str> =
+            with_creation_lock(DropProbe(seen.clone()), |_probe| Err("refused"));
+        assert!(refused.is_err());
+        assert_eq!(seen.get(), Some(true), "dropped without the lock");
+        assert!(!creation_lock_held(), "the lock outlived the call");
+        // What the constructor keeps is not dropped; the old pattern (check, early return,
+        // then lock) drops outside the lock, which this probe also sees.
+        let kept = with_creation_lock(DropProbe(seen.clone()), Some);
+        seen.set(None);
+        drop(kept);
+        assert_eq!(seen.get(), Some(false));
+    }
 
     static HELD_DURING_FIELD_DROP: AtomicBool = AtomicBool::new(false);
 

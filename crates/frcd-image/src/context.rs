@@ -55,12 +55,15 @@ impl ImageContext {
 
     /// Wraps a device and queue the caller owns, after checking features and limits.
     pub fn from_device(device: wgpu::Device, queue: wgpu::Queue) -> Result<Self, ImageError> {
-        Self::check(&device)?;
-        Ok(Self {
-            device,
-            queue,
-            adapter: None,
-            _release: frcd_gpu::ReleaseCreationLock::default(),
+        // A refused device is dropped under the creation lock (see frcd_gpu::with_creation_lock).
+        frcd_gpu::with_creation_lock((device, queue), |(device, queue)| {
+            Self::check(&device)?;
+            Ok(Self {
+                device,
+                queue,
+                adapter: None,
+                _release: frcd_gpu::ReleaseCreationLock::default(),
+            })
         })
     }
 
