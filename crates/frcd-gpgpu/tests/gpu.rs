@@ -513,10 +513,8 @@ fn pass_timers_time_every_level_and_leave_the_answer_alone() {
         let (tris, total) = (t.gpu_triangles.unwrap(), t.gpu_total.unwrap());
         let parts: std::time::Duration = t.gpu_levels.iter().sum::<std::time::Duration>() + tris;
         assert!(parts <= total, "{t:?}");
-        assert!(
-            total > std::time::Duration::ZERO && total <= t.wait,
-            "{t:?}"
-        );
+        // Not `total <= wait`: a driver may run the work inside `submit` (lavapipe once did).
+        assert!(total > std::time::Duration::ZERO, "{t:?}");
     }
 }
 
