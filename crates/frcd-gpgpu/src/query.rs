@@ -59,8 +59,9 @@ impl GpuCollision {
 }
 
 /// The answer of [`GpuContext::collide_batch`]: one [`GpuCollision`] per body pair, in input
-/// order, plus the batch's counters.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+/// order, plus the batch's counters. Equality compares the answers and counters, not
+/// [`GpuBatch::timings`] (two runs of one batch are equal).
+#[derive(Clone, Debug, Default)]
 pub struct GpuBatch {
     /// One answer per body pair, in input order.
     pub results: Vec<GpuCollision>,
@@ -78,6 +79,38 @@ pub struct GpuBatch {
     /// Where the batch's time went (wall-clock on the host; GPU passes with pass timers).
     pub timings: BatchTimings,
 }
+
+impl PartialEq for GpuBatch {
+    fn eq(&self, other: &Self) -> bool {
+        // Destructured so that a new field is a compile error here, not silently ignored.
+        let Self {
+            results,
+            node_pairs_tested,
+            levels,
+            submissions,
+            readbacks,
+            reruns,
+            timings: _,
+        } = self;
+        (
+            results,
+            node_pairs_tested,
+            levels,
+            submissions,
+            readbacks,
+            reruns,
+        ) == (
+            &other.results,
+            &other.node_pairs_tested,
+            &other.levels,
+            &other.submissions,
+            &other.readbacks,
+            &other.reruns,
+        )
+    }
+}
+
+impl Eq for GpuBatch {}
 
 /// Where a batch's time went. The host times are wall-clock; the `gpu_*` times come from GPU
 /// timestamps and are only filled when the context has pass timers

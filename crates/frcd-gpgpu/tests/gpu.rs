@@ -490,6 +490,12 @@ fn pass_timers_time_every_level_and_leave_the_answer_alone() {
         (ctx.collide_batch(&batch, scratch).expect("batch"), depth)
     };
     let (untimed, _) = run(&plain, &mut QueryScratch::default());
+    // Equal batches compare equal whatever their timings.
+    let mut other = untimed.clone();
+    other.timings.wait += std::time::Duration::from_millis(1);
+    assert_eq!(other, untimed);
+    other.reruns += 1;
+    assert_ne!(other, untimed);
     assert_eq!(untimed.results[0].pairs, want);
     assert!(untimed.timings.gpu_levels.is_empty());
     assert_eq!(
