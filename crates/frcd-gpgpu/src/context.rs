@@ -208,7 +208,13 @@ impl GpuContext {
 
     /// [`GpuContext::headless`] with options.
     pub fn headless_with(options: &HeadlessOptions) -> Result<Self, GpuError> {
-        // Adapter and device through the shared setup of frcd-gpu (the creation lock included).
+        // Under the creation lock throughout: the adapter (and the wgpu instance it may hold
+        // last, when the device is refused) is dropped before the lock is released.
+        frcd_gpu::with_creation_lock((), |()| Self::headless_locked(options))
+    }
+
+    fn headless_locked(options: &HeadlessOptions) -> Result<Self, GpuError> {
+        // Adapter and device through the shared setup of frcd-gpu.
         let adapter = frcd_gpu::request_adapter(&frcd_gpu::AdapterOptions {
             backends: options.backends,
             low_power: options.low_power,

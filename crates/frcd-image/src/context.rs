@@ -79,6 +79,13 @@ impl ImageContext {
     /// `WGPU_ADAPTER_NAME` when that is set, else wgpu's choice for `WGPU_POWER_PREF` (no
     /// preference when unset); set up through `frcd_gpu` as frcd-gpgpu's context is.
     pub fn headless_with(desc: wgpu::InstanceDescriptor) -> Result<Self, ImageError> {
+        // Under the creation lock throughout: a refused adapter (a GL one, say) and the wgpu
+        // instance it holds are dropped before the lock is released (NVIDIA's EGL teardown
+        // deadlocked against another thread's vkDestroyDevice outside it).
+        frcd_gpu::with_creation_lock(desc, Self::headless_locked)
+    }
+
+    fn headless_locked(desc: wgpu::InstanceDescriptor) -> Result<Self, ImageError> {
         let adapter = frcd_gpu::request_adapter_on(desc, &frcd_gpu::AdapterOptions::default())
             .map_err(|e| ImageError::NoAdapter(driver_reason(&e)))?;
         let info = adapter.get_info();
