@@ -410,58 +410,47 @@ pub fn run(mut o: Opts) -> Result<()> {
                 );
             }
         });
-        // The same step as one batch: checked equal first, then timed.
+        // The same step as one batch, with each re-decision policy: checked equal to the CPU's
+        // answers first, then timed. The row's `GPU batch` column is the default (`All`).
         let batch: Vec<_> = poses
             .iter()
             .map(|(pa, pb)| (&gpu_mesh, pa, &gpu_mesh, pb))
             .collect();
-        let got = ctx.collide_batch(&batch, &mut scratch)?;
-        for (k, (pa, pb)) in poses.iter().enumerate() {
-            if got.results[k].pairs != collide(&tree, pa, &tree, pb, &request).pairs {
-                bail!("level {level}: the batch differs from the CPU on body pair {k}");
+        let want: Vec<_> = poses
+            .iter()
+            .map(|(pa, pb)| collide(&tree, pa, &tree, pb, &request).pairs)
+            .collect();
+        let mut gpu_batch = f64::NAN;
+        for (recheck, label) in [
+            (frcd_gpgpu::Recheck::All, ""),
+            (frcd_gpgpu::Recheck::Uncertain, ", `Recheck::Uncertain`"),
+        ] {
+            ctx.set_recheck(recheck);
+            let got = ctx.collide_batch(&batch, &mut scratch)?;
+            if let Some(k) = (0..want.len()).find(|&k| got.results[k].pairs != want[k]) {
+                bail!("level {level}{label}: the batch differs from the CPU on body pair {k}");
             }
-        }
-        let mut samples = Vec::new();
-        let gpu_batch = median_ms(o.runs, || {
-            let got = ctx
-                .collide_batch(&batch, &mut scratch)
-                .expect("checked above");
-            samples.push(got.timings.clone());
-            std::hint::black_box(got);
-        });
-        let b = Breakdown::new(
-            format!("pair batch, level {level}"),
-            gpu_batch,
-            &got,
-            &samples,
-        );
-        println!("{}", b.line());
-        breakdowns.push(b);
-        // The same batch re-deciding only the uncertain pairs: checked equal, then timed.
-        ctx.set_recheck(frcd_gpgpu::Recheck::Uncertain);
-        let trusted = ctx.collide_batch(&batch, &mut scratch)?;
-        for (k, (pa, pb)) in poses.iter().enumerate() {
-            if trusted.results[k].pairs != collide(&tree, pa, &tree, pb, &request).pairs {
-                bail!("level {level}: Recheck::Uncertain differs from the CPU on body pair {k}");
+            let mut samples = Vec::new();
+            let ms = median_ms(o.runs, || {
+                let got = ctx
+                    .collide_batch(&batch, &mut scratch)
+                    .expect("checked above");
+                samples.push(got.timings.clone());
+                std::hint::black_box(got);
+            });
+            if recheck == frcd_gpgpu::Recheck::All {
+                gpu_batch = ms;
             }
+            let b = Breakdown::new(
+                format!("pair batch, level {level}{label}"),
+                ms,
+                &got,
+                &samples,
+            );
+            println!("{}", b.line());
+            breakdowns.push(b);
         }
-        let mut samples = Vec::new();
-        let trusted_ms = median_ms(o.runs, || {
-            let got = ctx
-                .collide_batch(&batch, &mut scratch)
-                .expect("checked above");
-            samples.push(got.timings.clone());
-            std::hint::black_box(got);
-        });
         ctx.set_recheck(frcd_gpgpu::Recheck::All);
-        let b = Breakdown::new(
-            format!("pair batch, level {level}, `Recheck::Uncertain`"),
-            trusted_ms,
-            &trusted,
-            &samples,
-        );
-        println!("{}", b.line());
-        breakdowns.push(b);
         println!(
             "level {level}: {} triangles/body, {touching} pairs, cpu1 {cpu1:.2} ms, cpu{threads} {cpu_all:.2} ms, gpu {gpu:.2} ms, gpu batch {gpu_batch:.2} ms",
             mesh.triangle_count()

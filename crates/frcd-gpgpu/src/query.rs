@@ -92,21 +92,12 @@ impl PartialEq for GpuBatch {
             reruns,
             timings: _,
         } = self;
-        (
-            results,
-            node_pairs_tested,
-            levels,
-            submissions,
-            readbacks,
-            reruns,
-        ) == (
-            &other.results,
-            &other.node_pairs_tested,
-            &other.levels,
-            &other.submissions,
-            &other.readbacks,
-            &other.reruns,
-        )
+        *results == other.results
+            && *node_pairs_tested == other.node_pairs_tested
+            && *levels == other.levels
+            && *submissions == other.submissions
+            && *readbacks == other.readbacks
+            && *reruns == other.reruns
     }
 }
 
