@@ -11,7 +11,8 @@
 
 use frcd_geom::{DQuat, DVec3, Pose, TriMesh, shapes};
 use frcd_obb::{
-    BuildOptions, FitMethod, Mode, ObbTree, PairCache, Request, collide, collide_cached, oracle,
+    BuildOptions, FitMethod, Mode, ObbTree, PairCache, Request, SplitMethod, collide,
+    collide_cached, oracle,
 };
 use std::path::Path;
 
@@ -111,6 +112,7 @@ pub fn mesh_tree(data: &[u8]) {
         FitMethod::AreaWeighted,
         FitMethod::HullSurface,
     ][(head[1] / 4 % 3) as usize];
+    let split = [SplitMethod::SurfaceCost, SplitMethod::MajorAxisMean][(head[1] / 12 % 2) as usize];
     let mut words = rest
         .chunks_exact(8)
         .map(|c| u64::from_le_bytes(c.try_into().unwrap()));
@@ -139,6 +141,7 @@ pub fn mesh_tree(data: &[u8]) {
     let options = BuildOptions {
         fit,
         max_leaf_triangles: leaf,
+        split,
     };
     let tree = ObbTree::build(&mesh, &options);
     let request = Request {

@@ -234,6 +234,13 @@ fn fit_of(f: crate::FitArg) -> frcd_obb::FitMethod {
     }
 }
 
+fn split_of(s: crate::SplitArg) -> frcd_obb::SplitMethod {
+    match s {
+        crate::SplitArg::Surface => frcd_obb::SplitMethod::SurfaceCost,
+        crate::SplitArg::Mean => frcd_obb::SplitMethod::MajorAxisMean,
+    }
+}
+
 fn options_of(args: &CheckerArgs, segments: bool, quiet: bool) -> Result<(Options, String)> {
     if !(16..=4096).contains(&args.resolution) {
         bail!("--resolution {} is outside 16..=4096", args.resolution);
@@ -249,10 +256,12 @@ fn options_of(args: &CheckerArgs, segments: bool, quiet: bool) -> Result<(Option
             build: frcd_obb::BuildOptions {
                 fit: fit_of(args.fit),
                 max_leaf_triangles: args.leaf.max(1),
+                split: split_of(args.split),
             },
             clearance_build: Some(frcd_obb::BuildOptions {
                 fit: fit_of(args.fit),
                 max_leaf_triangles: args.clearance_leaf.max(1),
+                split: split_of(args.split),
             }),
             clearance_spin: !args.no_spin_bound,
             ..Options::default()

@@ -96,6 +96,18 @@ pub struct CheckerArgs {
     /// OBB tree: box fitting rule.
     #[arg(long, value_enum, default_value = "vertex")]
     pub fit: FitArg,
+    /// OBB tree: where each node splits its triangles.
+    #[arg(long, value_enum, default_value = "surface")]
+    pub split: SplitArg,
+}
+
+/// OBB tree split rule on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SplitArg {
+    /// The cut of least surface cost across any box axis (fewer box tests, slower build).
+    Surface,
+    /// The plane through the mean across the major axis (PQP's rule; the fastest build).
+    Mean,
 }
 
 /// OBB fitting rule on the command line.

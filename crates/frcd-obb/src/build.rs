@@ -9,7 +9,7 @@
 //! that converting them gives exactly the compact nodes.
 
 use crate::nodes::{LEAF, TNode, compact_box};
-use crate::tree::{BuildOptions, Node};
+use crate::tree::{BuildOptions, Node, SplitMethod};
 use frcd_geom::fit::{
     FitMethod, area_weighted_axes, fit_obb, hull_surface_axes, symmetric_eigen_axes,
 };
@@ -152,6 +152,10 @@ fn build_into(mesh: &TriMesh, options: &BuildOptions, sink: &mut impl Sink) -> V
         })
         .collect();
     let mut back = vec![Item::ZERO; n];
+    let mut probes = match options.split {
+        SplitMethod::SurfaceCost => vec![Probe::default(); n],
+        SplitMethod::MajorAxisMean => Vec::new(),
+    };
     let mut order = vec![0u32; n];
     let nodes = sink;
     nodes.reserve(2 * n.div_ceil(leaf));
@@ -194,7 +198,12 @@ fn build_into(mesh: &TriMesh, options: &BuildOptions, sink: &mut impl Sink) -> V
             }
             FitMethod::VertexCovariance => symmetric_eigen_axes(vertex_covariance(src, mean)),
         });
-        let (obb, mid, sums) = box_and_split(axes, mean, src, dst);
+        let (obb, mid, sums) = match options.split {
+            SplitMethod::SurfaceCost => {
+                box_and_cost_split(axes, mean, src, dst, &mut probes[lo..hi])
+            }
+            SplitMethod::MajorAxisMean => box_and_split(axes, mean, src, dst),
+        };
         nodes.internal(&obb);
         // Both children's axes here, one eigen-solve after the other: independent, so their
         // long division and square-root chains overlap in the processor.
@@ -392,6 +401,198 @@ fn box_and_split(
     (obb, mid, sums)
 }
 
+/// What [`box_and_cost_split`] keeps of a triangle between its passes, in the node's box frame
+/// relative to the node's mean, in f32: three times its centroid (the sum of its vertices) and
+/// the bounds of its vertices as `[lo.x, lo.y, lo.z, 0, −hi.x, −hi.y, −hi.z, 0]` (both halves
+/// merge by `min`, so a merge is two four-lane minimums). Only the tree's shape depends on
+/// these values (boxes are made from the f64 vertices), so their rounding costs no correctness.
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(16))]
+struct Probe {
+    bounds: [f32; 8],
+    sum: [f32; 4],
+}
+
+/// Candidate cuts per axis for [`SplitMethod::SurfaceCost`] (the bins' inner boundaries).
+const BINS: usize = 16;
+
+/// The triangles of one bin of one axis: how many, and the bounds of their vertices (as in
+/// [`Probe::bounds`]).
+#[derive(Clone, Copy)]
+#[repr(C, align(16))]
+struct Bin {
+    bounds: [f32; 8],
+    count: u32,
+}
+
+impl Bin {
+    const EMPTY: Bin = Bin {
+        bounds: [f32::INFINITY; 8],
+        count: 0,
+    };
+
+    #[inline(always)]
+    fn merge(&mut self, bounds: &[f32; 8], count: u32) {
+        // Plain compares (`minps`) rather than `f32::min`'s NaN handling: probes are never
+        // NaN (finite f64 values converted), and a bound only feeds a cost.
+        for (b, &p) in self.bounds.iter_mut().zip(bounds) {
+            *b = if p < *b { p } else { *b };
+        }
+        self.count += count;
+    }
+
+    /// The side's cost: its triangle count times the surface measure of its extents (see
+    /// [`SplitMethod::SurfaceCost`]). In f32: extents beyond about 10¹⁹ give an infinite
+    /// cost, and ties then keep the first candidate (a shape choice, never a correctness one).
+    #[inline(always)]
+    fn cost(&self) -> f32 {
+        // An empty side's bounds are +inf, its extents −inf: clamped to 0 (its count is 0).
+        let e = [0, 1, 2].map(|k| {
+            let e = -(self.bounds[k + 4] + self.bounds[k]);
+            if e > 0.0 { e } else { 0.0 }
+        });
+        let mean = (e[0] + e[1] + e[2]) * (1.0 / 3.0);
+        (e[0] * e[1] + e[1] * e[2] + e[2] * e[0] + mean * mean) * self.count as f32
+    }
+}
+
+/// The bin of a centroid coordinate `sum` on an axis binned from `min` with `scale` bins per
+/// unit (the same function places a triangle in the choice and in the partition, so the
+/// chosen cut leaves exactly the counted triangles on each side).
+#[inline(always)]
+fn bin_of(sum: f32, min: f32, scale: f32, bins: usize) -> usize {
+    // Clamped as a float first (a NaN goes to bin 0): the conversion is then in range.
+    let x = (sum - min) * scale;
+    let last = (bins - 1) as f32;
+    let x = if x < last { x } else { last };
+    // Through i32: one conversion instruction (f32 to u64 is a sequence on x86-64).
+    (if x > 0.0 { x } else { 0.0 }) as i32 as usize
+}
+
+/// The cut of least [`Bin::cost`] over the node's probes, or `None` where no axis has two distinct centroid coordinates to cut between.
+fn cheapest_cut(probes: &[Probe], min: [f32; 3], max: [f32; 3]) -> Option<Cut> {
+    // Small nodes (most of a tree's nodes) get one bin per triangle: the same candidates a
+    // sorted sweep would mostly see, for a fraction of the fixed cost of 16 bins.
+    let nb = probes.len().clamp(2, BINS);
+    let scale = [0, 1, 2].map(|k| nb as f32 / (max[k] - min[k]));
+    let usable = [0, 1, 2].map(|k| max[k] > min[k] && scale[k].is_finite() && scale[k] > 0.0);
+    if !usable.iter().any(|&u| u) {
+        return None;
+    }
+    let mut bins = [[Bin::EMPTY; BINS]; 3];
+    for p in probes {
+        for k in 0..3 {
+            bins[k][bin_of(p.sum[k], min[k], scale[k], nb)].merge(&p.bounds, 1);
+        }
+    }
+    let total = probes.len() as u32;
+    let mut best: Option<(f32, usize, usize)> = None;
+    for k in (0..3).filter(|&k| usable[k]) {
+        // Costs of the right sides (bins b.. for each b), then a sweep of the left sides.
+        let mut right = [0.0f32; BINS];
+        let mut side = Bin::EMPTY;
+        for b in (1..nb).rev() {
+            side.merge(&bins[k][b].bounds, bins[k][b].count);
+            right[b] = side.cost();
+        }
+        let mut left = Bin::EMPTY;
+        for b in 0..nb - 1 {
+            left.merge(&bins[k][b].bounds, bins[k][b].count);
+            if left.count == 0 || left.count == total {
+                continue;
+            }
+            let cost = left.cost() + right[b + 1];
+            // Strictly less: ties keep the earlier axis (the major axis first).
+            if best.is_none_or(|(c, _, _)| cost < c) {
+                best = Some((cost, k, b));
+            }
+        }
+    }
+    best.map(|(_, k, b)| Cut {
+        axis: k,
+        min: min[k],
+        scale: scale[k],
+        bins: nb,
+        last_left: b,
+    })
+}
+
+/// A cut chosen by [`cheapest_cut`]: triangles whose centroid falls in bins `..=last_left` of
+/// `axis` go left.
+#[derive(Clone, Copy, Debug)]
+struct Cut {
+    axis: usize,
+    min: f32,
+    scale: f32,
+    bins: usize,
+    last_left: usize,
+}
+
+/// [`SplitMethod::SurfaceCost`]'s version of [`box_and_split`]: the same box and moments, with
+/// the cut chosen by [`cheapest_cut`]. Two passes: the first projects the vertices (the box)
+/// and keeps each triangle's [`Probe`], the bins are then filled from the probes, and the
+/// second pass partitions and sums the moments. Where no cut is usable, the cut of
+/// [`box_and_split`] (through `mean` across the major axis) is taken.
+fn box_and_cost_split(
+    axes: DMat3,
+    mean: DVec3,
+    src: &[Item],
+    dst: &mut [Item],
+    probes: &mut [Probe],
+) -> (Obb, usize, [Moments; 2]) {
+    let len = src.len();
+    debug_assert!(len == dst.len() && len == probes.len());
+    let t = axes.transpose();
+    let m = t * mean;
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    let mut mag = 0.0f64;
+    let mut smin = [f32::INFINITY; 3];
+    let mut smax = [f32::NEG_INFINITY; 3];
+    for (item, probe) in src.iter().zip(probes.iter_mut()) {
+        let [a, b, c] = item.v.map(|p| t * p);
+        let tlo = a.min(b).min(c);
+        let thi = a.max(b).max(c);
+        lo = lo.min(tlo);
+        hi = hi.max(thi);
+        mag = mag.max(item.mag);
+        let sum = (a + b + c - 3.0 * m).as_vec3();
+        for k in 0..3 {
+            smin[k] = smin[k].min(sum[k]);
+            smax[k] = smax[k].max(sum[k]);
+        }
+        let (l, h) = ((tlo - m).as_vec3(), (m - thi).as_vec3());
+        *probe = Probe {
+            bounds: [l.x, l.y, l.z, 0.0, h.x, h.y, h.z, 0.0],
+            sum: [sum.x, sum.y, sum.z, 0.0],
+        };
+    }
+    let obb = Obb::from_projection_bounds(axes, lo, hi, mag);
+    let cut = cheapest_cut(probes, smin, smax);
+    let mut sums = [Moments::new(mean); 2];
+    let (mut l, mut r) = (0usize, len);
+    for (item, probe) in src.iter().zip(probes.iter()) {
+        let right = match cut {
+            Some(c) => bin_of(probe.sum[c.axis], c.min, c.scale, c.bins) > c.last_left,
+            None => probe.sum[0] >= 0.0,
+        };
+        sums[right as usize].add(&item.v);
+        let k = if right { r - 1 } else { l };
+        dst[k] = *item;
+        l += (!right) as usize;
+        r -= right as usize;
+    }
+    if l > 0 && l < len {
+        return (obb, l, sums);
+    }
+    let mid = split_fallback(&axes, mean, dst);
+    let sums = [
+        Moments::of(&dst[..mid], mean),
+        Moments::of(&dst[mid..], mean),
+    ];
+    (obb, mid, sums)
+}
+
 /// The box of one triangle in its own frame (longest edge, in-plane normal to it, normal):
 /// flat and tight whatever the fit rule. `None` for a triangle without a usable normal.
 fn triangle_obb(t: &Triangle) -> Option<Obb> {
@@ -557,10 +758,13 @@ mod tests {
                 FitMethod::AreaWeighted,
                 FitMethod::HullSurface,
             ] {
-                for leaf in [1, 3] {
+                for (leaf, split) in [1, 3].into_iter().flat_map(|l| {
+                    [SplitMethod::SurfaceCost, SplitMethod::MajorAxisMean].map(|s| (l, s))
+                }) {
                     let options = BuildOptions {
                         fit,
                         max_leaf_triangles: leaf,
+                        split,
                     };
                     let (nodes, order) = build_nodes(&mesh, &options);
                     let n = mesh.triangle_count();
@@ -584,7 +788,7 @@ mod tests {
                         for p in &points {
                             assert!(
                                 obb.contains_point(*p),
-                                "{name} {fit:?} leaf {leaf}: node {i} misses {p}"
+                                "{name} {fit:?} {split:?} leaf {leaf}: node {i} misses {p}"
                             );
                         }
                         if !nodes[i].is_leaf() {
@@ -604,10 +808,16 @@ mod tests {
     fn compact_build_equals_the_converted_f64_build() {
         for (name, mesh) in meshes() {
             for fit in [FitMethod::VertexCovariance, FitMethod::AreaWeighted] {
-                for leaf in [1, 2, 5] {
+                for (leaf, split) in [
+                    (1, SplitMethod::SurfaceCost),
+                    (2, SplitMethod::SurfaceCost),
+                    (5, SplitMethod::SurfaceCost),
+                    (2, SplitMethod::MajorAxisMean),
+                ] {
                     let options = BuildOptions {
                         fit,
                         max_leaf_triangles: leaf,
+                        split,
                     };
                     let (nodes, order) = build_nodes(&mesh, &options);
                     let (want_nodes, want_ends) = crate::nodes::compact(&nodes, order.len());
@@ -675,6 +885,7 @@ mod tests {
             // The reference splits down to one triangle per leaf.
             let leaf_one = BuildOptions {
                 max_leaf_triangles: 1,
+                split: SplitMethod::MajorAxisMean,
                 ..BuildOptions::default()
             };
             let (nodes, _) = build_nodes(&mesh, &leaf_one);
@@ -683,6 +894,63 @@ mod tests {
             assert!(
                 (got / want - 1.0).abs() < 0.03,
                 "{name}: total box surface {got} against {want}"
+            );
+        }
+    }
+
+    /// A flat `length × width` plate at height `z`, `n × n` rectangles of two triangles each.
+    fn plate(n: u32, length: f64, width: f64, z: f64) -> TriMesh {
+        let mut vertices = Vec::new();
+        for i in 0..=n {
+            for j in 0..=n {
+                let (x, y) = (i as f64 / n as f64, j as f64 / n as f64);
+                vertices.push(DVec3::new(x * length, y * width, z));
+            }
+        }
+        let at = |i: u32, j: u32| i * (n + 1) + j;
+        let mut indices = Vec::new();
+        for i in 0..n {
+            for j in 0..n {
+                indices.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+                indices.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+            }
+        }
+        TriMesh::new(vertices, indices).expect("valid plate")
+    }
+
+    /// Two parallel 10 × 8 plates 5 apart: the vertices spread most along the plates' length
+    /// (variance 8.3, against 6.25 across the gap and 5.3 across the width), so the mean cut
+    /// across the major axis halves both plates (each child's box 5 × 8 × 5), where the surface
+    /// cost separates the plates (each child flat: 116 per triangle against 141).
+    #[test]
+    fn surface_cost_separates_parallel_plates_that_the_mean_cut_halves() {
+        let mesh = frcd_geom::shapes::merge(&[plate(8, 10.0, 8.0, 0.0), plate(8, 10.0, 8.0, 5.0)])
+            .expect("two plates");
+        let n = mesh.triangle_count();
+        let plate_of = |t: u32| (mesh.triangle(t as usize).v[0].z > 2.5) as usize;
+        for (split, separates) in [
+            (SplitMethod::SurfaceCost, true),
+            (SplitMethod::MajorAxisMean, false),
+        ] {
+            let options = BuildOptions {
+                split,
+                ..BuildOptions::default()
+            };
+            let (nodes, order) = build_nodes(&mesh, &options);
+            let left = ranges(&nodes, n)[1];
+            let plates: Vec<usize> = order[left.0..left.1].iter().map(|&t| plate_of(t)).collect();
+            let one_plate = plates.iter().all(|&p| p == plates[0]) && plates.len() == n / 2;
+            assert_eq!(
+                one_plate, separates,
+                "{split:?}: the root's left child holds {plates:?}"
+            );
+            // The children's boxes: flat (depth 0) when the plates are apart.
+            let depth = nodes[1].obb.half_extents.min_element();
+            assert_eq!(
+                depth < 1e-9,
+                separates,
+                "{split:?}: left child's box {:?}",
+                nodes[1].obb
             );
         }
     }

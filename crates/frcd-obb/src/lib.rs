@@ -48,7 +48,7 @@ pub use query::{
 };
 #[cfg(feature = "serde")]
 pub use saved::{LoadError, SavedTree};
-pub use tree::{BuildOptions, Node, ObbTree};
+pub use tree::{BuildOptions, Node, ObbTree, SplitMethod};
 pub use world::{
     Apart, BodyContact, BodyId, Clearance, ClearanceCache, ClearanceWork, SpinProfile, StepReport,
     StepTiming, World, WorldError, WorldOptions, pair_clearance, pair_clearance_apart,

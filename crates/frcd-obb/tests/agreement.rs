@@ -3,8 +3,8 @@
 
 use frcd_geom::{DQuat, DVec3, Pose, TriMesh, shapes};
 use frcd_obb::{
-    BuildOptions, Containment, FitMethod, Mode, ObbTree, PairCache, Request, TopVolume, World,
-    WorldOptions, collide, collide_cached, oracle,
+    BuildOptions, Containment, FitMethod, Mode, ObbTree, PairCache, Request, SplitMethod,
+    TopVolume, World, WorldOptions, collide, collide_cached, oracle,
 };
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use std::sync::Arc;
@@ -76,12 +76,20 @@ fn trees_hold_every_triangle_once_in_depth_first_layout() {
         FitMethod::AreaWeighted,
         FitMethod::HullSurface,
     ] {
-        for leaf in [0, 1, 3, 8] {
+        for (leaf, split) in [
+            (0, SplitMethod::SurfaceCost),
+            (1, SplitMethod::MajorAxisMean),
+        ]
+        .into_iter()
+        .chain([3, 8].map(|l| (l, SplitMethod::SurfaceCost)))
+        .chain([3, 8].map(|l| (l, SplitMethod::MajorAxisMean)))
+        {
             let tree = ObbTree::build(
                 &mesh,
                 &BuildOptions {
                     fit,
                     max_leaf_triangles: leaf,
+                    split,
                 },
             );
             let nodes = tree.nodes();
@@ -142,9 +150,14 @@ fn random_poses_agree_with_the_oracle() {
     let mut rng = StdRng::seed_from_u64(7);
     let a = shapes::icosphere(1.0, 2);
     let b = shapes::cuboid(DVec3::new(0.9, 0.3, 0.6));
-    for leaf in [1, 4] {
+    for (leaf, split) in [
+        (1, SplitMethod::SurfaceCost),
+        (4, SplitMethod::SurfaceCost),
+        (2, SplitMethod::MajorAxisMean),
+    ] {
         let opts = BuildOptions {
             max_leaf_triangles: leaf,
+            split,
             ..BuildOptions::default()
         };
         let (ta, tb) = (ObbTree::build(&a, &opts), ObbTree::build(&b, &opts));

@@ -80,6 +80,7 @@ fn fuzz_reproducer_subnormal_points() {
         &BuildOptions {
             fit,
             max_leaf_triangles: leaf,
+            ..BuildOptions::default()
         },
     );
     let request = Request {
