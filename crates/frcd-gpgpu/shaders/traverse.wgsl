@@ -15,7 +15,10 @@
 // (R, t). Every mesh of a context lives in one pair of arena textures (rgba32float, one texel =
 // 4 floats), each tree in its own local frame, at the item offsets of its pair entry:
 //   node i: 5 texels  (c.xyz, eps) (a0.xyz, h0) (a1.xyz, h1) (a2.xyz, h2) (right, first, count, 0)
-//   triangle j (leaf order): 3 texels (v0.xyz, mesh index) (v1.xyz, 0) (v2.xyz, 0)
+//   triangle j (leaf order): 3 texels (o0.xyz, mesh index) (o1.xyz, k1) (o2.xyz, k2): the
+//   vertices' offsets o = v - c from a reference point c = k 2^e on the mesh's power-of-two grid
+//   (k an integer vector, |k_i| <= 2^14, packed into k1 and k2; e per mesh, in PairInfo.fix);
+//   see `triangles` and `exact_w`.
 // Node and triangle indices inside an item are relative to the mesh's base; item i lives at
 // row-major slot i of (layer, row, column group); see `slot`.
 
@@ -245,24 +248,15 @@ fn tri_tri_3d(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
     return check_min_max(p1, r1, q1, p2, q2, r2, e);
 }
 
-// Decides whether triangle (p1, q1, r1) (A frame) meets triangle (pb, qb, rb) (B frame, mapped by
-// the pose here). Every sign is taken only when the computed value exceeds a forward error bound
-// that covers the f32 storage of the vertices, the pose's rounding and the arithmetic; a sign that
-// is not certain (touching, coplanar, degenerate, or simply too close) makes the answer
-// TRI_UNCERTAIN and the CPU decides that pair exactly.
-fn tri_tri(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
-           pb: vec3<f32>, qb: vec3<f32>, rb: vec3<f32>) -> u32 {
-    let p2 = rot(pb) + pose.t.xyz;
-    let q2 = rot(qb) + pose.t.xyz;
-    let r2 = rot(rb) + pose.t.xyz;
-    // Per-coordinate distance of the points used here from the f64 points the exact test
-    // sees. A: stored rounded to nearest (U/2 |x|), or flushed (TAU). B: stored (U/2), R and t
-    // rounded (U/2 |pb|_1, U/2 |t|), rot() + t (gamma_4 (|pb|_1 + |t|), |pb|_1 <= 3 |pb|_inf):
-    // <= U (15 |pb| + 4.5 |t|) + 5 TAU.
-    let pa_mag = max(maxabs(p1), max(maxabs(q1), maxabs(r1)));
-    let pb_mag = max(maxabs(pb), max(maxabs(qb), maxabs(rb)));
-    let delta = (max(0.5 * U * pa_mag, U * (16.0 * pb_mag + 5.0 * maxabs(pose.t.xyz)))
-        + 8.0 * TAU) * 1.01;
+// Decides whether triangle (p1, q1, r1) meets triangle (p2, q2, r2), both in A's frame (possibly
+// shifted by a common reference point: signs of orientations do not change), given a bound
+// `delta` on every coordinate's distance from the f64 points the exact test sees (A's vertices
+// and B's mapped by the f64 pose, shifted alike). Every sign is taken only when the computed
+// value exceeds a forward error bound covering `delta` and the arithmetic; a sign that is not
+// certain (touching, coplanar, degenerate, or simply too close) makes the answer TRI_UNCERTAIN
+// and the CPU decides that pair exactly.
+fn tri_tri_core(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
+                p2: vec3<f32>, q2: vec3<f32>, r2: vec3<f32>, delta: f32) -> u32 {
     // Box side of the six points bounds every coordinate difference (hi - lo rounds by U).
     let lo = min(min(min(p1, q1), min(r1, p2)), min(q2, r2));
     let hi = max(max(max(p1, q1), max(r1, p2)), max(q2, r2));
@@ -302,6 +296,186 @@ fn tri_tri(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
     return tri_tri_3d(p1, q1, r1, p2, r2, q2, sp2, sr2, sq2, e);
 }
 
+// The rotated path: triangle A (p1, q1, r1) and B (pb, qb, rb) rebuilt from their offsets and
+// reference points (p = o + c in f32; c = k 2^e is exact), B mapped by the f32 pose
+// (rot(pb) + t). Per-coordinate distance from the f64 points the exact test sees: A: offset
+// stored rounded to nearest (f64 subtraction, then f32: U/2 (1 + 2^-28) |o|), the sum o + c
+// (U |p|), or flushed (TAU each): U (|p_A| + 0.5 |o_A|) + 2 TAU. B: that storage error
+// (0.5 U |o_B| + U |pb| per coordinate), carried through a row of R (|R_i|_1 <= 3 in this bound):
+// 1.5 U |o_B| + 3 U |pb|; R and t rounded (U/2 |pb|_1, U/2 |t|); rot() + t (gamma_4 (|pb|_1 +
+// |t|), |pb|_1 <= 3 |pb|_inf): <= U (16.5 |pb| + 1.5 |o_B| + 4.5 |t|), plus flushes (the offset,
+// the sum, the rotation: <= 14 TAU through R). The (1 + U) factors of these first-order terms
+// are inside the final 1.01.
+fn tri_tri_rotated(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
+                   pb: vec3<f32>, qb: vec3<f32>, rb: vec3<f32>, oa_mag: f32, ob_mag: f32) -> u32 {
+    let p2 = rot(pb) + pose.t.xyz;
+    let q2 = rot(qb) + pose.t.xyz;
+    let r2 = rot(rb) + pose.t.xyz;
+    let pa_mag = max(maxabs(p1), max(maxabs(q1), maxabs(r1)));
+    let pb_mag = max(maxabs(pb), max(maxabs(qb), maxabs(rb)));
+    let delta = (max(U * (pa_mag + 0.5 * oa_mag),
+                     U * (17.0 * pb_mag + 2.0 * ob_mag + 5.0 * maxabs(pose.t.xyz)))
+        + 16.0 * TAU) * 1.01;
+    return tri_tri_core(p1, q1, r1, p2, q2, r2, delta);
+}
+
+// ---- the exact path: W = R c_B + t - c_A in integer arithmetic ----
+//
+// The CPU gives R in fixed point, M = round(R 2^46) (|M / 2^46 - R| <= 2^-47 per entry), and t on
+// the fine grid f = 2^(e_B - 46), T = round(t / f) (|T f - t| <= f / 2), both as 16-bit limbs
+// (PairInfo.m_*, t01, t23, t4; `pack::ExactPose`). With c_A = k_A 2^(e_A), c_B = k_B 2^(e_B),
+//   W_int / f = M k_B + T - k_A 2^(e_A - e_B + 46)
+// is an integer, computed here exactly: WGSL's i32 and u32 arithmetic is exact (wrapping) under
+// every float rule, and every partial below stays far inside i32. Products are 16 x 16 bits
+// (M's limbs times k_B, |k_B| < 2^15: below 2^31), split into 16-bit limbs and accumulated per
+// limb (five limbs, weights 2^0 .. 2^64, each sum below 2^20), then carries are propagated
+// (arithmetic shifts). A negative value is negated limb by limb. The magnitude (below 2^79:
+// |T| < 2^78, |k_A 2^sa| <= 2^76, |M k_B| < 2^62) is converted to f32 once: its top 32 bits (the
+// bits below are dropped: relative error < 2^-31) converted by f32() (one rounding, either
+// direction: U), scaled by ldexp (exact: the result is 0 or >= f >= 2^-96, as the CPU keeps
+// e_A, e_B >= -50, and below 2^79 f <= 2^56). So
+//   |W_f32 - W_int| <= (U + 2^-31)(1 + U) |W_int| <= 1.02 U |W_f32|.
+const M16: vec3<i32> = vec3<i32>(0xffff, 0xffff, 0xffff);
+const S16: vec3<u32> = vec3<u32>(16u, 16u, 16u);
+const ZERO3: vec3<i32> = vec3<i32>(0, 0, 0);
+
+// A five-limb integer per coordinate, limb i of weight 2^(16 i).
+struct Limbs {
+    l0: vec3<i32>,
+    l1: vec3<i32>,
+    l2: vec3<i32>,
+    l3: vec3<i32>,
+    l4: vec3<i32>,
+}
+
+// Propagates carries: limbs 0-3 end in [0, 2^16), limb 4 keeps the sign.
+fn carry(x: Limbs) -> Limbs {
+    var o = x;
+    var c = o.l0 >> S16;
+    o.l0 = o.l0 & M16;
+    o.l1 = o.l1 + c;
+    c = o.l1 >> S16;
+    o.l1 = o.l1 & M16;
+    o.l2 = o.l2 + c;
+    c = o.l2 >> S16;
+    o.l2 = o.l2 & M16;
+    o.l3 = o.l3 + c;
+    c = o.l3 >> S16;
+    o.l3 = o.l3 & M16;
+    o.l4 = o.l4 + c;
+    return o;
+}
+
+// Adds column j of M (low limbs packed M0 | M1 << 16, high limb M >> 32) times k_B[j].
+fn mac_column(x: Limbs, lo: vec3<u32>, hi: vec3<i32>, k: i32) -> Limbs {
+    var o = x;
+    let p0 = vec3<i32>(lo & vec3<u32>(0xffffu)) * k;
+    let p1 = vec3<i32>(lo >> S16) * k;
+    let p2 = hi * k;
+    o.l0 = o.l0 + (p0 & M16);
+    o.l1 = o.l1 + (p0 >> S16) + (p1 & M16);
+    o.l2 = o.l2 + (p1 >> S16) + (p2 & M16);
+    o.l3 = o.l3 + (p2 >> S16);
+    return o;
+}
+
+// A triangle's grid coordinates (`pack::pack_k`: 16 bits each, biased by 2^15).
+fn unpack_k(w1: f32, w2: f32) -> vec3<i32> {
+    let a = u32(w1);
+    let b = u32(w2);
+    return vec3<i32>(vec3<u32>(a & 0xffffu, (a >> 16u) | ((b & 0xffu) << 8u), b >> 8u))
+        - vec3<i32>(32768);
+}
+
+// W / f = M k_B + T - k_A 2^sa as f32 times f = 2^ef (xyz, one rounding) and 1 in w (0: out of
+// range, which the CPU's ranges rule out). sa in [0, 62], ef >= -96 (`pack::ExactPose`).
+fn exact_w(ka: vec3<i32>, kb: vec3<i32>, sa: i32, ef: i32) -> vec4<f32> {
+    var x: Limbs;
+    x.l0 = vec3<i32>(pose.t01.xyz & vec3<u32>(0xffffu));
+    x.l1 = vec3<i32>(pose.t01.xyz >> S16);
+    x.l2 = vec3<i32>(pose.t23.xyz & vec3<u32>(0xffffu));
+    x.l3 = vec3<i32>(pose.t23.xyz >> S16);
+    x.l4 = pose.t4.xyz;
+    x = mac_column(x, pose.m_lo0.xyz, pose.m_hi0.xyz, kb.x);
+    x = mac_column(x, pose.m_lo1.xyz, pose.m_hi1.xyz, kb.y);
+    x = mac_column(x, pose.m_lo2.xyz, pose.m_hi2.xyz, kb.z);
+    // - k_A 2^sa, sa = 16 q + r in [0, 62]: k_A 2^r (|.| < 2^30) split at limb q.
+    let q = sa >> 4u;
+    let ks = ka * (1 << u32(sa & 15));
+    let kl = ks & M16;
+    let kh = ks >> S16;
+    x.l0 = x.l0 - select(ZERO3, kl, vec3<bool>(q == 0));
+    x.l1 = x.l1 - select(ZERO3, kl, vec3<bool>(q == 1)) - select(ZERO3, kh, vec3<bool>(q == 0));
+    x.l2 = x.l2 - select(ZERO3, kl, vec3<bool>(q == 2)) - select(ZERO3, kh, vec3<bool>(q == 1));
+    x.l3 = x.l3 - select(ZERO3, kl, vec3<bool>(q == 3)) - select(ZERO3, kh, vec3<bool>(q == 2));
+    x.l4 = x.l4 - select(ZERO3, kh, vec3<bool>(q == 3));
+    x = carry(x);
+    // Magnitude: negate the negative ones.
+    let neg = x.l4 < ZERO3;
+    let sg = select(vec3<i32>(1), vec3<i32>(-1), neg);
+    x.l0 = x.l0 * sg;
+    x.l1 = x.l1 * sg;
+    x.l2 = x.l2 * sg;
+    x.l3 = x.l3 * sg;
+    x.l4 = x.l4 * sg;
+    x = carry(x);
+    // |V| < 2^79: limb 4 below 2^15 (else, impossible by the CPU's ranges, report uncertain).
+    let ok = all(x.l4 < vec3<i32>(32768));
+    // A 64-bit window (hi, lo) holding the leading bits with hi < 2^31 (so the shifts below stay
+    // within 1..31): limbs 3-0, or 4-1 when |V| >= 2^63 (then limb 0 is dropped: relative error
+    // < 2^-47, inside the 2^-31 below).
+    let big = (x.l4 != ZERO3) | (x.l3 >= vec3<i32>(32768));
+    let hi = vec3<u32>(select((x.l3 << S16) | x.l2, (x.l4 << S16) | x.l3, big));
+    let lo = vec3<u32>(select((x.l1 << S16) | x.l0, (x.l2 << S16) | x.l1, big));
+    let e0 = select(vec3<i32>(ef), vec3<i32>(ef + 16), big);
+    // Top 32 bits: hi = 0: lo itself; else shifted so hi's leading bit is bit 31.
+    let n1 = select(firstLeadingBit(hi) + vec3<u32>(1u), vec3<u32>(0u), hi == vec3<u32>(0u));
+    let top = (hi << ((vec3<u32>(32u) - n1) & vec3<u32>(31u))) | (lo >> n1);
+    let m = ldexp(vec3<f32>(top), vec3<i32>(n1) + e0);
+    return vec4<f32>(select(m, -m, neg), select(0.0, 1.0, ok));
+}
+
+// The exact path: A's offsets o_A; B's points pb rotated by the f32 R, plus W; all relative to
+// c_A. Mode 1: pb = o_B (B's offsets), W = R c_B + t - c_A. Mode 2 (B small next to A, see
+// `pack::ExactPose`): pb = o_B + c_B rebuilt in f32, W = t - c_A (c_B's term is then k_B = 0).
+// Per-coordinate distance from the f64 points the exact test sees (shifted by c_A):
+// A: o_A's storage (f64 subtraction, then f32: U/2 (1 + 2^-28) |o_A|) or a flush (TAU).
+// B: the exact point is R (b - c_B) + W_exact (mode 2: R b + W_exact), W_exact = R c_B + t - c_A
+//   (f64 R, t), and the exact test maps b in f64 (gamma_4 (|b|_1 + |t|) <= 2^-51 (|c_B|_1 +
+//   3.01 |pb| + |t|)).
+//   - |W_int - W_exact| <= 2^-47 |c_B|_1 + f / 2 (M's and T's rounding; mode 2: f / 2): with
+//     the f64 mapping's terms, <= (|k_B|_1 + 0.5) f + 2^-46 |t| (mode 1: |c_B|_1 2^-46 =
+//     |k_B|_1 f; mode 2: k_B = 0 here).
+//   - |W_f32 - W_int| <= 1.02 U |W| (above).
+//   - pb: mode 1: o_B's storage, 0.5 U |o_B| per coordinate; mode 2: that plus the sum
+//     o_B + c_B (U |pb|).
+//   - rot(pb): pb's error through a row of R (|R_i|_1 <= 3 here: mode 1 1.5 U |pb|, mode 2
+//     1.5 U |o_B| + 3 U |pb|), R rounded (U/2 |pb|_1 = 1.5 U |pb|), the dot (gamma_3 |pb|_1:
+//     9.01 U |pb|); + W: one rounding (U (3.01 |pb| + |W|)). Mode 1: <= 15.1 U |pb| + 2.03 U
+//     |W|; mode 2: <= 16.6 U |pb| + 1.5 U |o_B| + 2.03 U |W| (2^-51 3.01 |pb| is inside the
+//     margins to 16 and 17).
+//   - flushes: o_B, the sum with c_B, the products and sums of rot(), the sum with W: <= 12 TAU.
+// delta = max(0.5 U |o_A|, U (cp |pb| + co |o_B| + 3 |W|) + (|k_B|_1 + 0.5) f + 2^-46 |t|)
+//   + 16 TAU, times 1.01 (the (1 + U) factors above and the ~14 roundings of delta itself),
+//   (cp, co) = (16, 0) in mode 1, (17, 2) in mode 2. |o|, |W| and f are leaf-sized, not
+//   mesh-sized (mode 2: |pb| is B's size, small next to A's), and the terms in |c_B| and |t|
+//   are ~2^-23 U of the mesh.
+fn tri_tri_exact(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
+                 pb: vec3<f32>, qb: vec3<f32>, rb: vec3<f32>, w: vec3<f32>, kb: vec3<i32>,
+                 ef: i32, ob_mag: f32, mode2: bool) -> u32 {
+    let p2 = rot(pb) + w;
+    let q2 = rot(qb) + w;
+    let r2 = rot(rb) + w;
+    let oa_mag = max(maxabs(p1), max(maxabs(q1), maxabs(r1)));
+    let pb_mag = max(maxabs(pb), max(maxabs(qb), maxabs(rb)));
+    let cp = select(16.0, 17.0, mode2);
+    let co = select(0.0, 2.0, mode2);
+    let far = ldexp(l1(vec3<f32>(kb)) + 0.5, ef) + 1.4210855e-14 * maxabs(pose.t.xyz);
+    let delta = (max(0.5 * U * oa_mag, U * (cp * pb_mag + co * ob_mag + 3.0 * maxabs(w)) + far)
+        + 16.0 * TAU) * 1.01;
+    return tri_tri_core(p1, q1, r1, p2, q2, r2, delta);
+}
+
 // Appends every triangle pair of two overlapping leaves to the triangle list (past its capacity
 // nothing is written; the CPU sees `state.tris` above it and re-runs with a larger list).
 fn leaf_pair(p: u32, na: Node, nb: Node) {
@@ -339,7 +513,31 @@ fn triangles(@builtin(workgroup_id) wid: vec3<u32>,
     let b0 = texel(tris, sb, 0u);
     let b1 = texel(tris, sb, 1u);
     let b2 = texel(tris, sb, 2u);
-    let r = tri_tri(a0.xyz, a1.xyz, a2.xyz, b0.xyz, b1.xyz, b2.xyz);
+    let ka = unpack_k(a1.w, a2.w);
+    let kb = unpack_k(b1.w, b2.w);
+    var r = TRI_UNCERTAIN;
+    let ob_mag = max(maxabs(b0.xyz), max(maxabs(b1.xyz), maxabs(b2.xyz)));
+    if pose.fix.x != 0 {
+        // Mode 1: fine grid 2^(e_B - 46); mode 2: 2^(e_A - 46), B rebuilt, k_B's term 0.
+        let mode2 = pose.fix.x == 2;
+        let sa = select(pose.fix.y - pose.fix.z + 46, 46, mode2);
+        let ef = select(pose.fix.z - 46, pose.fix.y - 46, mode2);
+        let kbx = select(kb, ZERO3, mode2);
+        let w = exact_w(ka, kbx, sa, ef);
+        if w.w != 0.0 {
+            // c_B = k_B 2^(e_B), exact; added in mode 2 only.
+            let cb = select(vec3<f32>(0.0), ldexp(vec3<f32>(kb), vec3<i32>(pose.fix.z)), mode2);
+            r = tri_tri_exact(a0.xyz, a1.xyz, a2.xyz, b0.xyz + cb, b1.xyz + cb, b2.xyz + cb,
+                              w.xyz, kbx, ef, ob_mag, mode2);
+        }
+    } else {
+        // c = k 2^e, exact (|k| < 2^15, e >= -50, or k = 0).
+        let ca = ldexp(vec3<f32>(ka), vec3<i32>(pose.fix.y));
+        let cb = ldexp(vec3<f32>(kb), vec3<i32>(pose.fix.z));
+        let oa_mag = max(maxabs(a0.xyz), max(maxabs(a1.xyz), maxabs(a2.xyz)));
+        r = tri_tri_rotated(a0.xyz + ca, a1.xyz + ca, a2.xyz + ca,
+                            b0.xyz + cb, b1.xyz + cb, b2.xyz + cb, oa_mag, ob_mag);
+    }
     if r != TRI_DISJOINT {
         let o = atomicAdd(&state.out, 1u);
         if o < params.caps.y {
@@ -361,7 +559,12 @@ fn traverse(@builtin(workgroup_id) wid: vec3<u32>,
         return;
     }
     let entry = frontier_in[idx];
-    pose = pairs[entry.x];
+    // Only the f32 pose and the bases (the exact path's words are the triangle pass's).
+    pose.r0 = pairs[entry.x].r0;
+    pose.r1 = pairs[entry.x].r1;
+    pose.r2 = pairs[entry.x].r2;
+    pose.t = pairs[entry.x].t;
+    pose.base = pairs[entry.x].base;
     // Node indices in the frontier are relative to each mesh's first node.
     let pair = entry.yz;
     let na = load_node(pose.base.x + pair.x);

@@ -123,6 +123,8 @@ pub struct GpuContext {
     pub(crate) pass_timers: bool,
     /// Which reported pairs the CPU re-decides.
     pub(crate) recheck: Recheck,
+    /// The triangle pass's exact reference-point path ([`GpuContext::set_exact_offsets`]).
+    pub(crate) exact_offsets: bool,
     /// Last field: the GPU objects above are dropped under `frcd_gpu::creation_lock` (see the
     /// `Drop` impl).
     _release: frcd_gpu::ReleaseCreationLock,
@@ -312,6 +314,7 @@ impl GpuContext {
             readbacks: AtomicU64::new(0),
             pass_timers: false,
             recheck: Recheck::All,
+            exact_offsets: true,
             _release: frcd_gpu::ReleaseCreationLock::default(),
         })
     }
@@ -369,6 +372,23 @@ impl GpuContext {
     /// Which reported triangle pairs the CPU re-decides.
     pub fn recheck(&self) -> Recheck {
         self.recheck
+    }
+
+    /// Turns the triangle pass's exact reference-point path on (the default) or off. On, each
+    /// body pair whose integer ranges hold computes `W = R c_B + t - c_A` (the triangles'
+    /// reference points, see `pack`'s module docs) exactly in integer arithmetic and rotates
+    /// only the small vertex offsets in f32, so its error bound scales with the triangles, not
+    /// the meshes: far fewer uncertain pairs. Off (or where the ranges cannot hold), every pair
+    /// takes the rotated path (B's vertices rotated into A's frame in f32).
+    /// [`crate::GpuCollision::exact_offsets`] says which path a pair took. Answers are the same
+    /// either way.
+    pub fn set_exact_offsets(&mut self, on: bool) {
+        self.exact_offsets = on;
+    }
+
+    /// Whether the exact reference-point path is on ([`GpuContext::set_exact_offsets`]).
+    pub fn exact_offsets(&self) -> bool {
+        self.exact_offsets
     }
 
     /// Whether batches time their GPU passes ([`GpuContext::enable_pass_timers`]).

@@ -5,6 +5,13 @@
 //! by line (same operation order); the tests check that no pair the exact f64 test finds
 //! touching is ever declared separated or disjoint, and that the tests could fail (with the
 //! error bounds removed, some rounding mode loses a pair).
+//!
+//! The triangle pass has two paths (issue 10): the exact one (`tri_tri_exact`: the offsets of
+//! each triangle from its grid reference point, and `W = R c_B + t - c_A` computed in the
+//! shader's integer limbs, mirrored here with checked i32 arithmetic and compared with an i128
+//! computation) and the rotated one (`tri_tri_rotated`: vertices rebuilt from the offsets, B
+//! rotated in f32). `tri_tri_absolute` is main's arithmetic before the offsets (absolute f32
+//! vertices), kept as the baseline the uncertain counts are compared with.
 
 use std::cell::Cell;
 
@@ -349,8 +356,9 @@ fn tri_tri_3d(
     check_min_max(p1, r1, q1, p2, q2, r2, e)
 }
 
-/// Mirror of the shader's `tri_tri`: triangle `a` in A's frame, `b` in B's frame.
-pub(crate) fn tri_tri(p: &PoseF, a: [V3; 3], b: [V3; 3]) -> u32 {
+/// Main's `tri_tri` before issue 10's offsets (absolute f32 vertices, B rotated in f32): the
+/// baseline of the uncertain counts. Triangle `a` in A's frame, `b` in B's frame.
+pub(crate) fn tri_tri_absolute(p: &PoseF, a: [V3; 3], b: [V3; 3]) -> u32 {
     let [p1, q1, r1] = a;
     let [pb, qb, rb] = b;
     let p2 = rot(p, pb).add(p.t);
@@ -365,6 +373,14 @@ pub(crate) fn tri_tri(p: &PoseF, a: [V3; 3], b: [V3; 3]) -> u32 {
         ),
         1.01,
     );
+    tri_tri_core([p1, q1, r1], [p2, q2, r2], delta)
+}
+
+/// Mirror of the shader's `tri_tri_core`: both triangles in A's frame (shifted alike), `delta`
+/// bounding every coordinate's distance from the exact test's points.
+pub(crate) fn tri_tri_core(a: [V3; 3], b: [V3; 3], delta: f32) -> u32 {
+    let [p1, q1, r1] = a;
+    let [p2, q2, r2] = b;
     let lo = p1.min(q1).min(r1.min(p2)).min(q2.min(r2));
     let hi = p1.max(q1).max(r1.max(p2)).max(q2.max(r2));
     let ext = hi.sub(lo);
@@ -423,10 +439,192 @@ pub(crate) fn tri_tri(p: &PoseF, a: [V3; 3], b: [V3; 3]) -> u32 {
     tri_tri_3d(p1, q1, r1, p2, r2, q2, sp2, sr2, sq2, e)
 }
 
+/// `x 2^e` for an f32 `x` whose result is 0 or normal (the shader's `ldexp` where exact).
+fn ldexp(x: f32, e: i32) -> f32 {
+    let r = (x as f64 * 2f64.powi(e)) as f32;
+    assert!(
+        r == 0.0 || r.is_normal(),
+        "ldexp({x}, {e}) = {r} is not exact"
+    );
+    r
+}
+
+/// A triangle as the triangle pass loads it: offsets from its reference point and the point's
+/// grid coordinates.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct TriOff {
+    pub o: [V3; 3],
+    pub k: [i64; 3],
+}
+
+/// Mirror of the shader's `exact_w` (limb by limb, every i32 operation checked for overflow),
+/// asserted equal to [`crate::pack::ExactPose::w_units`]'s i128 value. `None`: `|W / f| >= 2^79`
+/// (ruled out by the CPU's ranges; the shader then reports the pair uncertain).
+pub(crate) fn exact_w(ep: &crate::pack::ExactPose, ka: [i64; 3], kb: [i64; 3]) -> Option<V3> {
+    let w = ep.words();
+    let direct = ep.w_units(ka, kb);
+    let mode2 = w.fix[0] == 2;
+    let sa = if mode2 { 46 } else { w.fix[1] - w.fix[2] + 46 };
+    let ef = if mode2 { w.fix[1] - 46 } else { w.fix[2] - 46 };
+    let kb = if mode2 { [0; 3] } else { kb };
+    let ck = |x: Option<i32>| x.expect("i32 overflow in exact_w");
+    let carry = |l: &mut [i32; 5]| {
+        for i in 0..4 {
+            let c = l[i] >> 16;
+            l[i] &= 0xffff;
+            l[i + 1] = ck(l[i + 1].checked_add(c));
+        }
+    };
+    let mut out = [0f32; 3];
+    for i in 0..3 {
+        let mut l = [
+            (w.t01[i] & 0xffff) as i32,
+            (w.t01[i] >> 16) as i32,
+            (w.t23[i] & 0xffff) as i32,
+            (w.t23[i] >> 16) as i32,
+            w.t4[i],
+        ];
+        for (j, &kbj) in kb.iter().enumerate() {
+            let k = i32::try_from(kbj).unwrap();
+            let (lo, hi) = (w.m_lo[j][i], w.m_hi[j][i]);
+            let p0 = ck(((lo & 0xffff) as i32).checked_mul(k));
+            let p1 = ck(((lo >> 16) as i32).checked_mul(k));
+            let p2 = ck(hi.checked_mul(k));
+            let add = |x: i32, ys: &[i32]| ys.iter().fold(x, |a, &y| ck(a.checked_add(y)));
+            l[0] = add(l[0], &[p0 & 0xffff]);
+            l[1] = add(l[1], &[p0 >> 16, p1 & 0xffff]);
+            l[2] = add(l[2], &[p1 >> 16, p2 & 0xffff]);
+            l[3] = add(l[3], &[p2 >> 16]);
+        }
+        let q = (sa >> 4) as usize;
+        let ks = ck(i32::try_from(ka[i]).unwrap().checked_mul(1 << (sa & 15)));
+        l[q] = ck(l[q].checked_sub(ks & 0xffff));
+        l[q + 1] = ck(l[q + 1].checked_sub(ks >> 16));
+        carry(&mut l);
+        let neg = l[4] < 0;
+        if neg {
+            for x in &mut l {
+                *x = -*x;
+            }
+            carry(&mut l);
+        }
+        let v: i128 = (0..5).map(|m| (l[m] as i128) << (16 * m)).sum();
+        assert_eq!(
+            if neg { -v } else { v },
+            direct[i],
+            "exact_w: limbs disagree"
+        );
+        if l[4] >= 32768 {
+            return None;
+        }
+        let big = l[4] != 0 || l[3] >= 32768;
+        let (hi, lo, e0) = if big {
+            (
+                (l[4] << 16 | l[3]) as u32,
+                (l[2] << 16 | l[1]) as u32,
+                ef + 16,
+            )
+        } else {
+            ((l[3] << 16 | l[2]) as u32, (l[1] << 16 | l[0]) as u32, ef)
+        };
+        let n1 = if hi == 0 { 0 } else { 32 - hi.leading_zeros() };
+        let top = (hi << ((32 - n1) & 31)) | (lo >> n1);
+        // u32 -> f32: one rounding, either direction (the environment's).
+        let m = ldexp(round(top as f64, 0.0), n1 as i32 + e0);
+        out[i] = if neg { -m } else { m };
+    }
+    Some(v3(out[0], out[1], out[2]))
+}
+
+/// Mirror of the shader's exact path: `exact_w`, then `tri_tri_exact` (`TRI_UNCERTAIN` when W
+/// does not fit); mode 2 rebuilds B's vertices as `o_B + k_B 2^(e_B)` first.
+pub(crate) fn tri_tri_exact(p: &PoseF, ep: &crate::pack::ExactPose, a: &TriOff, b: &TriOff) -> u32 {
+    let Some(w) = exact_w(ep, a.k, b.k) else {
+        return TRI_UNCERTAIN;
+    };
+    let mode2 = ep.words().fix[0] == 2;
+    let ef = ep.fine_exponent();
+    let kbx = if mode2 { [0; 3] } else { b.k };
+    let cb = if mode2 {
+        v3(
+            ldexp(b.k[0] as f32, ep.eb),
+            ldexp(b.k[1] as f32, ep.eb),
+            ldexp(b.k[2] as f32, ep.eb),
+        )
+    } else {
+        V3::default()
+    };
+    let [p1, q1, r1] = a.o;
+    let ob_mag = maxabs(b.o[0]).max(maxabs(b.o[1]).max(maxabs(b.o[2])));
+    let [pb, qb, rb] = b.o.map(|o| if mode2 { o.add(cb) } else { o });
+    let p2 = rot(p, pb).add(w);
+    let q2 = rot(p, qb).add(w);
+    let r2 = rot(p, rb).add(w);
+    let oa_mag = maxabs(p1).max(maxabs(q1).max(maxabs(r1)));
+    let pb_mag = maxabs(pb).max(maxabs(qb).max(maxabs(rb)));
+    let (cp, co) = if mode2 { (17.0, 2.0) } else { (16.0, 0.0) };
+    let kb = v3(kbx[0] as f32, kbx[1] as f32, kbx[2] as f32);
+    let far = add(
+        ldexp(add(l1(kb), 0.5), ef),
+        mul(2f32.powi(-46), maxabs(p.t)),
+    );
+    let delta = mul(
+        add(
+            mul(mul(0.5, U), oa_mag).max(mad(
+                U,
+                add(add(mul(cp, pb_mag), mul(co, ob_mag)), mul(3.0, maxabs(w))),
+                far,
+            )),
+            mul(16.0, TAU),
+        ),
+        1.01,
+    );
+    tri_tri_core([p1, q1, r1], [p2, q2, r2], delta)
+}
+
+/// Mirror of the shader's rotated path: vertices rebuilt as `o + k 2^e` in f32 (grid exponents
+/// `ea`, `eb`; 0 for a mesh without a grid, whose `k` are 0), then `tri_tri_rotated`.
+pub(crate) fn tri_tri_rotated(p: &PoseF, ea: i32, eb: i32, a: &TriOff, b: &TriOff) -> u32 {
+    let c = |k: [i64; 3], e: i32| {
+        v3(
+            ldexp(k[0] as f32, e),
+            ldexp(k[1] as f32, e),
+            ldexp(k[2] as f32, e),
+        )
+    };
+    let (ca, cb) = (c(a.k, ea), c(b.k, eb));
+    let mag = |o: [V3; 3]| maxabs(o[0]).max(maxabs(o[1]).max(maxabs(o[2])));
+    let (oa_mag, ob_mag) = (mag(a.o), mag(b.o));
+    let [p1, q1, r1] = a.o.map(|o| o.add(ca));
+    let [pb, qb, rb] = b.o.map(|o| o.add(cb));
+    let p2 = rot(p, pb).add(p.t);
+    let q2 = rot(p, qb).add(p.t);
+    let r2 = rot(p, rb).add(p.t);
+    let pa_mag = maxabs(p1).max(maxabs(q1).max(maxabs(r1)));
+    let pb_mag = maxabs(pb).max(maxabs(qb).max(maxabs(rb)));
+    let delta = mul(
+        add(
+            mul(U, mad(0.5, oa_mag, pa_mag)).max(mul(
+                U,
+                add(
+                    add(mul(17.0, pb_mag), mul(2.0, ob_mag)),
+                    mul(5.0, maxabs(p.t)),
+                ),
+            )),
+            mul(16.0, TAU),
+        ),
+        1.01,
+    );
+    tri_tri_core([p1, q1, r1], [p2, q2, r2], delta)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pack::obb_to_f32;
+    use crate::pack::{
+        ExactPose, GRID_BITS, grid_coords, grid_exponent_for, grid_point, obb_to_f32,
+        pack_tree_rows, unpack_k,
+    };
     use frcd_geom::{DQuat, DVec3, Pose, Triangle, shapes};
     use frcd_obb::{BuildOptions, ObbTree, RelativeFrame, oracle};
     use frcd_tritri::Method;
@@ -533,34 +731,159 @@ mod tests {
         out
     }
 
+    /// A triangle of a one-triangle "mesh" as the packing stores it (grid from its own vertices).
+    fn tri_off(t: &Triangle) -> (TriOff, Option<i32>) {
+        let mag =
+            t.v.iter()
+                .map(|p| p.abs().max_element())
+                .fold(0.0, f64::max);
+        let e = grid_exponent_for(mag);
+        let k = e.map_or([0; 3], |e| grid_point(&t.v, e));
+        let c = grid_coords(k, e.unwrap_or(0));
+        (
+            TriOff {
+                o: t.v.map(|v| f(v - c)),
+                k,
+            },
+            e,
+        )
+    }
+
+    /// The triangle pass as the shader runs it: the exact path where the pair's ranges hold
+    /// (`Some` exact pose), else the rotated path.
+    fn pass(
+        pose: &PoseF,
+        ep: Option<&ExactPose>,
+        grids: (Option<i32>, Option<i32>),
+        a: &TriOff,
+        b: &TriOff,
+    ) -> u32 {
+        match ep {
+            Some(ep) => tri_tri_exact(pose, ep, a, b),
+            None => tri_tri_rotated(pose, grids.0.unwrap_or(0), grids.1.unwrap_or(0), a, b),
+        }
+    }
+
+    /// `touching_cases` as the triangle pass sees them: (absolute f32 triangles for main's
+    /// arithmetic, packed triangles, grids, exact pose if the ranges hold, f32 pose).
+    #[allow(clippy::type_complexity)]
+    fn packed_cases() -> Vec<(
+        [V3; 3],
+        [V3; 3],
+        TriOff,
+        TriOff,
+        (Option<i32>, Option<i32>),
+        Option<ExactPose>,
+        PoseF,
+    )> {
+        touching_cases()
+            .iter()
+            .map(|(a, b, frame)| {
+                let (ta, ea) = tri_off(a);
+                let (tb, eb) = tri_off(b);
+                let ep = ExactPose::new(&frame.m, frame.t, ea, eb);
+                (tri_f(a), tri_f(b), ta, tb, (ea, eb), ep, pose_f(frame))
+            })
+            .collect()
+    }
+
     #[test]
     fn no_touching_triangle_pair_is_declared_disjoint_under_any_rounding() {
-        let cases = touching_cases();
+        let cases = packed_cases();
         assert!(cases.len() >= 1000, "{}", cases.len());
+        // Most cases take the exact path; the tiny ones (1e-30) have no grid.
+        let exact = cases.iter().filter(|c| c.5.is_some()).count();
+        assert!(exact * 5 >= cases.len() * 3, "{exact} of {}", cases.len());
         for env in envs(1.0) {
             set_env(env);
-            for (i, (a, b, frame)) in cases.iter().enumerate() {
-                let r = tri_tri(&pose_f(frame), tri_f(a), tri_f(b));
-                assert_ne!(r, TRI_DISJOINT, "{env:?}: case {i} lost: {a:?} {b:?}");
+            for (i, (a, b, ta, tb, grids, ep, pose)) in cases.iter().enumerate() {
+                let r = tri_tri_absolute(pose, *a, *b);
+                assert_ne!(r, TRI_DISJOINT, "{env:?}: case {i} lost (absolute)");
+                let r = pass(pose, ep.as_ref(), *grids, ta, tb);
+                assert_ne!(r, TRI_DISJOINT, "{env:?}: case {i} lost ({ep:?})");
+                // The rotated path on every case, also where the exact one applies.
+                let r = tri_tri_rotated(pose, grids.0.unwrap_or(0), grids.1.unwrap_or(0), ta, tb);
+                assert_ne!(r, TRI_DISJOINT, "{env:?}: case {i} lost (rotated)");
             }
         }
+        set_env(envs(1.0)[0]);
     }
 
     #[test]
     fn without_the_bounds_some_rounding_loses_a_pair() {
         // The test above can fail: with the error bounds zeroed, directed rounding declares
-        // some touching pair disjoint.
-        let cases = touching_cases();
-        let mut lost = 0;
+        // some touching pair disjoint, on each path.
+        let cases = packed_cases();
+        let mut lost = [0; 3];
         for env in envs(0.0) {
             set_env(env);
-            lost += cases
-                .iter()
-                .filter(|(a, b, frame)| tri_tri(&pose_f(frame), tri_f(a), tri_f(b)) == TRI_DISJOINT)
-                .count();
+            for (a, b, ta, tb, grids, ep, pose) in &cases {
+                let (ga, gb) = (grids.0.unwrap_or(0), grids.1.unwrap_or(0));
+                lost[0] += (tri_tri_absolute(pose, *a, *b) == TRI_DISJOINT) as usize;
+                lost[1] += (tri_tri_rotated(pose, ga, gb, ta, tb) == TRI_DISJOINT) as usize;
+                if let Some(ep) = ep {
+                    lost[2] += (tri_tri_exact(pose, ep, ta, tb) == TRI_DISJOINT) as usize;
+                }
+            }
         }
         set_env(envs(1.0)[0]);
-        assert!(lost > 0);
+        assert!(lost.iter().all(|&n| n > 0), "{lost:?}");
+    }
+
+    #[test]
+    fn exact_w_matches_the_integer_value_within_its_bound() {
+        // Random grid coordinates, rotations, translations and grid exponents across both
+        // modes and the whole range (|W / f| up to 2^79, both windows of the conversion):
+        // the limbs equal the i128 value (asserted inside `exact_w`) and the f32 W is within
+        // 1.02 U |W| of it under every rounding mode.
+        let seed = Cell::new(424242u64);
+        let rnd = || {
+            let mut x = seed.get();
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            seed.set(x);
+            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let lim = (1i64 << GRID_BITS) as f64;
+        let mut windows = [0usize; 2];
+        let mut cases = Vec::new();
+        for n in 0..4000 {
+            let ea = -50 + (n % 73) as i32;
+            let eb = ea - [0, 5, -16, 16, 30, -46, 3][n % 7];
+            let q = DQuat::from_axis_angle(
+                DVec3::new(rnd(), rnd(), rnd()).normalize_or(DVec3::Z),
+                3.0 * rnd(),
+            );
+            let m = frcd_geom::DMat3::from_quat(q);
+            // t of the meshes' size (A's grid times up to 2^16).
+            let t = DVec3::new(rnd(), rnd(), rnd()) * 2f64.powi(ea + 16) * rnd().abs();
+            let Some(ep) = ExactPose::new(&m, t, Some(ea), Some(eb).filter(|_| n % 11 != 0)) else {
+                continue;
+            };
+            let k = || [rnd(), rnd(), rnd()].map(|x| (x * lim).round() as i64);
+            cases.push((ep, k(), k()));
+        }
+        assert!(cases.len() > 3000, "{}", cases.len());
+        for env in envs(1.0) {
+            set_env(env);
+            for (ep, ka, kb) in &cases {
+                let exact = ep.w_units(*ka, *kb);
+                let w = exact_w(ep, *ka, *kb).expect("in range");
+                let f = 2f64.powi(ep.fine_exponent());
+                for (i, got) in [w.x, w.y, w.z].into_iter().enumerate() {
+                    let want = exact[i] as f64 * f;
+                    windows[(exact[i].unsigned_abs() >> 64 != 0) as usize] += 1;
+                    let err = (got as f64 - want).abs();
+                    assert!(
+                        err <= 1.02 * U as f64 * (got as f64).abs(),
+                        "{env:?}: {ep:?} {ka:?} {kb:?}: {got} against {want}"
+                    );
+                }
+            }
+        }
+        set_env(envs(1.0)[0]);
+        assert!(windows.iter().all(|&n| n > 0), "{windows:?}");
     }
 
     /// Box pairs that share a point for certain, most of them only just: a corner of A (the
@@ -745,6 +1068,10 @@ mod tests {
             assert!(!pairs.is_empty(), "case {case}");
             let frame = RelativeFrame::new(&pa, &pb);
             let pose = pose_f(&frame);
+            let ((pa_tris, ga), (pb_tris, gb)) = (packed(&ta), packed(&tb));
+            let grids = (ga, gb);
+            let ep = ExactPose::new(&frame.m, frame.t, ga, gb);
+            assert!(ep.is_some(), "case {case}");
             let mut node_pairs = std::collections::BTreeSet::new();
             for &(i, j) in &pairs {
                 for &x in &anc_a[i as usize] {
@@ -762,11 +1089,108 @@ mod tests {
                     );
                 }
                 for &(i, j) in &pairs {
-                    let r = tri_tri(&pose, tri_f(&ta.triangle(i)), tri_f(&tb.triangle(j)));
+                    let (x, y) = (&pa_tris[i as usize], &pb_tris[j as usize]);
+                    let r = pass(&pose, ep.as_ref(), grids, x, y);
                     assert_ne!(r, TRI_DISJOINT, "{env:?}: pair ({i}, {j}) lost");
                 }
             }
         }
         set_env(envs(1.0)[0]);
+    }
+
+    /// Every triangle of a tree as `pack_tree_rows` stores it (decoded from the texels), by
+    /// input index, and the mesh's grid exponent.
+    fn packed(tree: &ObbTree) -> (Vec<TriOff>, Option<i32>) {
+        let p = pack_tree_rows(tree, 64, 64).unwrap();
+        let mut out = vec![
+            TriOff {
+                o: [V3::default(); 3],
+                k: [0; 3]
+            };
+            tree.triangle_count()
+        ];
+        for slot in 0..tree.triangle_count() as u32 {
+            let t: [[f32; 4]; 3] =
+                std::array::from_fn(|j| p.tris[p.tri_layout.linear(slot, j as u32)]);
+            out[t[0][3] as usize] = TriOff {
+                o: t.map(|x| v3(x[0], x[1], x[2])),
+                k: unpack_k(t[1][3], t[2][3]),
+            };
+        }
+        (out, p.grid)
+    }
+
+    #[test]
+    fn on_icospheres_through_each_other_the_exact_path_is_never_wrong_and_rarely_uncertain() {
+        // Two icospheres (5,120 triangles each) through each other, at the origin and 3e3 away
+        // (the GPU test `the_exact_path_leaves_far_fewer_uncertain_pairs`'s scene): every triangle pair whose f64 boxes (B mapped into A's frame) meet, decided by
+        // the triangle pass as it runs now under every rounding mode, never wrong (disjoint
+        // when touching, touching when disjoint); and far fewer uncertain than main's
+        // arithmetic (round to nearest; counted over all candidates, as the GPU reports them).
+        let ma = shapes::icosphere(1.0, 4);
+        let mb = shapes::icosphere(0.9, 4);
+        let (ta, tb) = (
+            ObbTree::build(&ma, &BuildOptions::default()),
+            ObbTree::build(&mb, &BuildOptions::default()),
+        );
+        let ((pa_tris, ga), (pb_tris, gb)) = (packed(&ta), packed(&tb));
+        let far = DVec3::new(3.0e3, -1.0e3, 500.0);
+        let (mut old, mut new, mut touching, mut candidates) = (0, 0, 0, 0);
+        for k in 0..6 {
+            let s = k as f64 / 6.0;
+            let base = if k % 2 == 0 { DVec3::ZERO } else { far };
+            let pose_a = Pose::new(base, DQuat::from_rotation_y(0.3 * s));
+            let pose_b = Pose::new(
+                base + DVec3::new(0.4 + 1.2 * s, 0.11, -0.05),
+                DQuat::from_rotation_z(0.9 * s) * DQuat::from_rotation_x(0.4),
+            );
+            let frame = RelativeFrame::new(&pose_a, &pose_b);
+            let pose = pose_f(&frame);
+            let ep = ExactPose::new(&frame.m, frame.t, ga, gb);
+            assert!(ep.is_some());
+            let b_mapped: Vec<Triangle> = mb.triangles().map(|t| frame.triangle(&t)).collect();
+            let bounds = |t: &Triangle| {
+                let lo = t.v[0].min(t.v[1]).min(t.v[2]) - DVec3::splat(1e-6);
+                let hi = t.v[0].max(t.v[1]).max(t.v[2]) + DVec3::splat(1e-6);
+                (lo, hi)
+            };
+            let bb: Vec<_> = b_mapped.iter().map(bounds).collect();
+            let mut cand = Vec::new();
+            for (i, t) in ma.triangles().enumerate() {
+                let (lo, hi) = bounds(&t);
+                for (j, (l2, h2)) in bb.iter().enumerate() {
+                    if lo.cmple(*h2).all() && l2.cmple(hi).all() {
+                        let exact = frcd_tritri::intersects(Method::Exact, &t, &b_mapped[j]);
+                        cand.push((i, j, exact));
+                    }
+                }
+            }
+            candidates += cand.len();
+            touching += cand.iter().filter(|c| c.2).count();
+            for env in envs(1.0) {
+                set_env(env);
+                for &(i, j, exact) in &cand {
+                    let r = pass(&pose, ep.as_ref(), (ga, gb), &pa_tris[i], &pb_tris[j]);
+                    let wrong = (exact && r == TRI_DISJOINT) || (!exact && r == TRI_TOUCH);
+                    assert!(
+                        !wrong,
+                        "{env:?}: pose {k}, pair ({i}, {j}): {r}, exact {exact}"
+                    );
+                }
+            }
+            set_env(envs(1.0)[0]);
+            for &(i, j, _) in &cand {
+                let (x, y) = (ma.triangle(i), mb.triangle(j));
+                old += (tri_tri_absolute(&pose, tri_f(&x), tri_f(&y)) == TRI_UNCERTAIN) as usize;
+                new += (pass(&pose, ep.as_ref(), (ga, gb), &pa_tris[i], &pb_tris[j])
+                    == TRI_UNCERTAIN) as usize;
+            }
+        }
+        println!(
+            "icospheres: {candidates} candidates, {touching} touching: {old} uncertain before, {new} now"
+        );
+        assert!(touching > 500, "{touching}");
+        assert!(old > 100, "{old}");
+        assert!(new * 10 <= old, "{new} against {old}");
     }
 }

@@ -306,6 +306,8 @@ pub struct GpuMesh {
     pub(crate) max_leaf: u32,
     /// The tree's mesh (shared, not copied), for the CPU's exact re-decision.
     pub(crate) mesh: Arc<TriMesh>,
+    /// Exponent of the triangles' reference-point grid (`pack::grid_exponent`).
+    pub(crate) grid: Option<i32>,
     bytes: u64,
 }
 
@@ -367,6 +369,7 @@ impl GpuContext {
             tris,
             tri_layout,
             depth,
+            grid,
         } = pack_tree_rows(
             tree,
             arena.nodes.layout.items_per_row,
@@ -411,6 +414,7 @@ impl GpuContext {
             depth,
             max_leaf,
             mesh: tree.mesh().clone(),
+            grid,
             bytes,
         })
     }

@@ -7,10 +7,20 @@
 //! | item | texels |
 //! |---|---|
 //! | node | `(c, eps) (a0, h0) (a1, h1) (a2, h2) (right, first, count, 0)` |
-//! | triangle (leaf order) | `(v0, mesh index) (v1, 0) (v2, 0)` |
+//! | triangle (leaf order) | `(o0, mesh index) (o1, k word 1) (o2, k word 2)` |
 //!
 //! Indices are stored as f32, exact below 2^24, so trees are limited to 2^24 nodes and
 //! triangles ([`MAX_ITEMS`]).
+//!
+//! **Triangles about a grid point.** Each mesh gets a power-of-two grid `g = 2^e`
+//! ([`grid_exponent`]: `e = ceil(log2 S) - GRID_BITS`, `S` the largest vertex coordinate), and
+//! each triangle a reference point `c = k g` (its centroid snapped to the grid, `|k_i| <=
+//! 2^GRID_BITS`); the texels hold the offsets `o = v - c` (f64, rounded to nearest f32) and `k`
+//! packed into two f32-exact integers ([`pack_k`]). The triangle pass then computes
+//! `R c_B + t - c_A` exactly in integer arithmetic ([`ExactPose`]) and rotates only the small
+//! offsets in f32 (issue 10: far fewer uncertain pairs). A mesh too small for the grid's range
+//! (`e < GRID_MIN_EXP`) or with every vertex at the origin keeps `k = 0` (offsets are the
+//! vertices) and its pairs take the rotated path.
 //!
 //! **Box rounding.** A node's f64 box is the parallelepiped `{c + A s : |s_i| <= h_i}`. Its f32
 //! image keeps `c32 = fl(c)`, `A32 = fl(A)` (rounded to nearest) and inflates the half extents by
@@ -39,6 +49,15 @@ pub const U32: f64 = 1.0 / 16_777_216.0;
 pub const MAX_MAGNITUDE: f64 = 68_719_476_736.0;
 /// Fewest texture array layers a packed texture gets (see [`TexLayout::new`]).
 pub const MIN_LAYERS: u32 = 2;
+/// Grid coordinates of triangle reference points are at most `2^GRID_BITS` in magnitude.
+pub const GRID_BITS: i32 = 14;
+/// Smallest grid exponent a mesh gets (smaller meshes store their vertices, `k = 0`): the
+/// triangle pass's fine grid `2^(e_B - R_FRAC_BITS)` must stay a normal f32 (>= 2^-96 here).
+pub const GRID_MIN_EXP: i32 = -50;
+/// Fractional bits of the fixed-point rotation of the exact path (`|M / 2^46 - R| <= 2^-47`).
+pub const R_FRAC_BITS: i32 = 46;
+/// Bias of a packed grid coordinate (16 bits each).
+const K_BIAS: i64 = 1 << 15;
 
 /// Where the items of one kind live in a 2D array texture.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -179,6 +198,8 @@ pub struct PackedTree {
     pub tri_layout: TexLayout,
     /// Depth of the tree (a single leaf: 1): the traversal records this many levels.
     pub depth: u32,
+    /// Exponent of the mesh's reference-point grid (`None`: every `k = 0`, see the module docs).
+    pub grid: Option<i32>,
 }
 
 /// `x` rounded to the nearest f32 at or above it (f32::MAX for values above it, +inf stays).
@@ -448,6 +469,7 @@ fn pack_into(
             node_texels[node_layout.linear(i as u32, k as u32)] = texel;
         }
     }
+    let grid = grid_exponent(tree)?;
     let mut tri_texels = vec![[0f32; 4]; tri_layout.texel_count()];
     for (slot, &index) in order.iter().enumerate() {
         let tri = ((index as usize) < tree.triangle_count())
@@ -455,27 +477,16 @@ fn pack_into(
             .ok_or_else(|| {
                 GpuError::InvalidInput(format!("leaf order names triangle {index}, out of range"))
             })?;
-        if !tri.is_finite() {
-            return Err(GpuError::InvalidInput(format!(
-                "triangle {index} has a non-finite coordinate"
-            )));
-        }
-        let mag = tri
-            .v
-            .iter()
-            .map(|p| p.abs().max_element())
-            .fold(0.0, f64::max);
-        if mag > MAX_MAGNITUDE {
-            return Err(GpuError::MagnitudeOutOfRange {
-                what: format!("triangle {index}"),
-                value: mag,
-                limit: MAX_MAGNITUDE,
-            });
-        }
-        for k in 0..3 {
-            let p = v3(tri.v[k]);
-            let w = if k == 0 { index as f32 } else { 0.0 };
-            tri_texels[tri_layout.linear(slot as u32, k as u32)] = [p[0], p[1], p[2], w];
+        let k = match grid {
+            Some(e) => grid_point(&tri.v, e),
+            None => [0; 3],
+        };
+        let c = grid_coords(k, grid.unwrap_or(0));
+        let (w1, w2) = pack_k(k);
+        for j in 0..3 {
+            let o = v3(tri.v[j] - c);
+            let w = [index as f32, w1, w2][j];
+            tri_texels[tri_layout.linear(slot as u32, j as u32)] = [o[0], o[1], o[2], w];
         }
     }
     Ok(PackedTree {
@@ -484,7 +495,234 @@ fn pack_into(
         tris: tri_texels,
         tri_layout,
         depth: depth_of(tree),
+        grid,
     })
+}
+
+/// The largest vertex coordinate magnitude of the tree's triangles, after checking every
+/// vertex is finite and within [`MAX_MAGNITUDE`].
+fn vertex_magnitude(tree: &ObbTree) -> Result<f64, GpuError> {
+    let mut mag = 0f64;
+    for index in 0..tree.triangle_count() as u32 {
+        let tri = tree.triangle(index);
+        if !tri.is_finite() {
+            return Err(GpuError::InvalidInput(format!(
+                "triangle {index} has a non-finite coordinate"
+            )));
+        }
+        let m = tri
+            .v
+            .iter()
+            .map(|p| p.abs().max_element())
+            .fold(0.0, f64::max);
+        if m > MAX_MAGNITUDE {
+            return Err(GpuError::MagnitudeOutOfRange {
+                what: format!("triangle {index}"),
+                value: m,
+                limit: MAX_MAGNITUDE,
+            });
+        }
+        mag = mag.max(m);
+    }
+    Ok(mag)
+}
+
+/// The exponent `e` of a tree's reference-point grid: the smallest `m` with `2^m >= S` (`S` the
+/// largest vertex coordinate magnitude) minus [`GRID_BITS`], so every centroid snaps to
+/// `|k_i| <= 2^GRID_BITS`. `None` when `e < GRID_MIN_EXP` or every vertex is at the origin.
+/// Refuses non-finite vertices and magnitudes above [`MAX_MAGNITUDE`].
+pub fn grid_exponent(tree: &ObbTree) -> Result<Option<i32>, GpuError> {
+    Ok(grid_exponent_for(vertex_magnitude(tree)?))
+}
+
+/// [`grid_exponent`] of a mesh whose largest vertex coordinate magnitude is `s` (finite, at
+/// most [`MAX_MAGNITUDE`]).
+pub fn grid_exponent_for(s: f64) -> Option<i32> {
+    if !(s > 0.0 && s <= MAX_MAGNITUDE) {
+        return None;
+    }
+    // s <= 2^36: m in [-1074, 36]; powi of 2 is exact there.
+    let mut m = s.log2().ceil() as i32;
+    while 2f64.powi(m) < s {
+        m += 1;
+    }
+    while m > -1074 && 2f64.powi(m - 1) >= s {
+        m -= 1;
+    }
+    let e = m - GRID_BITS;
+    (e >= GRID_MIN_EXP).then_some(e)
+}
+
+/// The grid point `k` (units of `2^e`) nearest the triangle's centroid, clamped to
+/// `|k_i| <= 2^GRID_BITS` (any integer point is valid; near the centroid keeps offsets small).
+pub fn grid_point(v: &[DVec3; 3], e: i32) -> [i64; 3] {
+    let c = (v[0] + v[1] + v[2]) / 3.0;
+    let lim = (1i64 << GRID_BITS) as f64;
+    let inv = 2f64.powi(-e);
+    [c.x, c.y, c.z].map(|x| (x * inv).round().clamp(-lim, lim) as i64)
+}
+
+/// `k 2^e` (exact in f64: `|k| <= 2^15`).
+pub fn grid_coords(k: [i64; 3], e: i32) -> DVec3 {
+    let g = 2f64.powi(e);
+    DVec3::new(k[0] as f64 * g, k[1] as f64 * g, k[2] as f64 * g)
+}
+
+/// Packs `k` (`|k_i| < 2^15`) into two f32-exact integers below 2^24 (texels 1 and 2's `w`):
+/// biased by 2^15 to 16 bits each, `x | (y & 0xff) << 16` and `y >> 8 | z << 8`.
+pub fn pack_k(k: [i64; 3]) -> (f32, f32) {
+    let b = k.map(|x| (x + K_BIAS).clamp(0, 0xffff) as u32);
+    let w1 = b[0] | (b[1] & 0xff) << 16;
+    let w2 = b[1] >> 8 | b[2] << 8;
+    (w1 as f32, w2 as f32)
+}
+
+/// Inverse of [`pack_k`] (the shader's `unpack_k`).
+pub fn unpack_k(w1: f32, w2: f32) -> [i64; 3] {
+    let (w1, w2) = (w1 as u32, w2 as u32);
+    let x = (w1 & 0xffff) as i64;
+    let y = ((w1 >> 16) | (w2 & 0xff) << 8) as i64;
+    let z = (w2 >> 8) as i64;
+    [x - K_BIAS, y - K_BIAS, z - K_BIAS]
+}
+
+/// The relative pose of a body pair for the triangle pass's exact path: `R` in fixed point
+/// (`M = round(R 2^46)`, so `|M / 2^46 - R| <= 2^-47` per entry) and `t` on a fine grid `f`
+/// (`T = round(t / f)`, `|T f - t| <= f / 2`), with both meshes' grid exponents. Two modes:
+///
+/// - **1** (A's grid within `2^-46 .. 2^16` of B's): `f = 2^(e_B - 46)` and
+///   `W = R c_B + t - c_A` is, in units of `f`, the integer `M k_B + T - k_A 2^(e_A - e_B + 46)`.
+/// - **2** (B's grid more than 2^16 below A's, or B without a grid): B's vertices are rebuilt in
+///   f32 (`o_B + c_B`, B being small next to A) and only `W = t - c_A` is exact: `f = 2^(e_A -
+///   46)`, `W / f = T - k_A 2^46`.
+///
+/// The shader computes `W / f` exactly in integer limbs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ExactPose {
+    /// 1 or 2 (see above).
+    pub mode: i32,
+    /// `M[i][j] = round(R_ij 2^46)`.
+    pub m: [[i64; 3]; 3],
+    /// `T = round(t / f)`, `|T| < 2^78`.
+    pub t: [i128; 3],
+    /// Grid exponent of A.
+    pub ea: i32,
+    /// Grid exponent of B (0 without a grid: its `k` are 0).
+    pub eb: i32,
+}
+
+impl ExactPose {
+    /// Shift of A's grid coordinates against the fine grid: `e_A - e_B + 46` (mode 1) or 46.
+    pub fn shift_a(&self) -> i32 {
+        match self.mode {
+            1 => self.ea - self.eb + R_FRAC_BITS,
+            _ => R_FRAC_BITS,
+        }
+    }
+
+    /// Exponent of the fine grid: `e_B - 46` (mode 1) or `e_A - 46`.
+    pub fn fine_exponent(&self) -> i32 {
+        match self.mode {
+            1 => self.eb - R_FRAC_BITS,
+            _ => self.ea - R_FRAC_BITS,
+        }
+    }
+
+    /// The exact path's pose, or `None` where its integer ranges cannot hold (A without a
+    /// grid, A's grid more than 2^46 below B's, or `|T| >= 2^78`): that pair then takes the
+    /// rotated path.
+    pub fn new(m: &DMat3, t: DVec3, ea: Option<i32>, eb: Option<i32>) -> Option<Self> {
+        let ea = ea?;
+        let (mode, eb) = match eb {
+            Some(eb) if (-R_FRAC_BITS..=16).contains(&(ea - eb)) => (1, eb),
+            Some(eb) if ea - eb > 16 => (2, eb),
+            Some(_) => return None,
+            None => (2, 0),
+        };
+        let scale = 2f64.powi(R_FRAC_BITS);
+        let mut mm = [[0i64; 3]; 3];
+        for (i, row) in mm.iter_mut().enumerate() {
+            for (j, x) in row.iter_mut().enumerate() {
+                let r = m.col(j)[i];
+                if !r.is_finite() || r.abs() > 1.0 + 1e-6 {
+                    return None;
+                }
+                *x = (r * scale).round() as i64;
+            }
+        }
+        let mut out = Self {
+            mode,
+            m: mm,
+            t: [0; 3],
+            ea,
+            eb,
+        };
+        // t / f: exact scaling by a power of two (|t| <= 2^37, -ef <= 96: no overflow).
+        let inv_f = 2f64.powi(-out.fine_exponent());
+        let lim = 2f64.powi(78);
+        for i in 0..3 {
+            let v = (t[i] * inv_f).round();
+            if !v.is_finite() || v.abs() >= lim {
+                return None;
+            }
+            out.t[i] = v as i128;
+        }
+        Some(out)
+    }
+
+    /// `W / f`, exactly (i128): `M k_B + T - k_A 2^shift` (mode 1) or `T - k_A 2^46` (mode 2).
+    pub fn w_units(&self, ka: [i64; 3], kb: [i64; 3]) -> [i128; 3] {
+        std::array::from_fn(|i| {
+            let mk: i128 = match self.mode {
+                1 => (0..3).map(|j| self.m[i][j] as i128 * kb[j] as i128).sum(),
+                _ => 0,
+            };
+            mk + self.t[i] - ((ka[i] as i128) << self.shift_a())
+        })
+    }
+
+    /// The shader's words: `fix = (mode, e_A, e_B, 0)`; per column `j` of `M`, rows' low limbs
+    /// `M0 | M1 << 16` (u32) and high limbs `M >> 32` (i32); `T`'s limbs `T0 | T1 << 16`,
+    /// `T2 | T3 << 16` (u32) and `T >> 64` (i32), per coordinate.
+    pub fn words(&self) -> ExactWords {
+        let mut w = ExactWords {
+            fix: [self.mode, self.ea, self.eb, 0],
+            ..Default::default()
+        };
+        for j in 0..3 {
+            for i in 0..3 {
+                let m = self.m[i][j];
+                w.m_lo[j][i] = (m & 0xffff) as u32 | (((m >> 16) & 0xffff) as u32) << 16;
+                w.m_hi[j][i] = (m >> 32) as i32;
+            }
+        }
+        for i in 0..3 {
+            let t = self.t[i];
+            let limb = |k: u32| ((t >> (16 * k)) & 0xffff) as u32;
+            w.t01[i] = limb(0) | limb(1) << 16;
+            w.t23[i] = limb(2) | limb(3) << 16;
+            w.t4[i] = (t >> 64) as i32;
+        }
+        w
+    }
+}
+
+/// [`ExactPose::words`]: what `PairInfo` carries for the exact path (zeros: the rotated path,
+/// with `fix = (0, e_A, e_B, 0)`, the grid exponents still needed to rebuild vertices).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ExactWords {
+    /// `(path, e_A, e_B, 0)`, path 1 or 2: exact ([`ExactPose`]'s modes), 0: rotated.
+    pub fix: [i32; 4],
+    /// Per column of `M`: `M0 | M1 << 16` per row (w unused).
+    pub m_lo: [[u32; 4]; 3],
+    /// Per column of `M`: `M >> 32` per row.
+    pub m_hi: [[i32; 4]; 3],
+    /// `T0 | T1 << 16` per coordinate.
+    pub t01: [u32; 4],
+    /// `T2 | T3 << 16` per coordinate.
+    pub t23: [u32; 4],
+    /// `T >> 64` per coordinate.
+    pub t4: [i32; 4],
 }
 
 #[cfg(test)]
@@ -596,11 +834,24 @@ mod tests {
             assert_eq!(t4[1] as u32, n.first);
             assert_eq!(t4[2] as u32, n.count);
         }
+        let e = p.grid.expect("a unit sphere has a grid");
+        assert_eq!(e, -GRID_BITS);
         for (slot, &index) in tree.leaf_triangles().iter().enumerate() {
-            let t0 = p.tris[p.tri_layout.linear(slot as u32, 0)];
-            assert_eq!(t0[3] as u32, index);
-            let v = tree.triangle(index).v[0];
-            assert_eq!(t0[0], v.x as f32);
+            let t: [[f32; 4]; 3] =
+                std::array::from_fn(|j| p.tris[p.tri_layout.linear(slot as u32, j as u32)]);
+            assert_eq!(t[0][3] as u32, index);
+            // Offsets from the reference point k 2^e, k the centroid's nearest grid point.
+            let tri = tree.triangle(index);
+            let k = unpack_k(t[1][3], t[2][3]);
+            assert_eq!(k, grid_point(&tri.v, e));
+            assert!(k.iter().all(|x| x.abs() <= 1 << GRID_BITS));
+            let c = grid_coords(k, e);
+            for (tj, v) in t.iter().zip(tri.v) {
+                assert_eq!(tj[0], (v.x - c.x) as f32);
+                assert_eq!(tj[2], (v.z - c.z) as f32);
+                // Small: within a triangle's size plus half a grid step of 0.
+                assert!(tj[1].abs() < 0.2, "{tj:?}");
+            }
         }
         assert!(p.depth >= 7, "{}", p.depth);
     }
@@ -616,5 +867,55 @@ mod tests {
             obb_to_f32(&obb, 3),
             Err(GpuError::BadNodeAxes { node: 3, .. })
         ));
+    }
+
+    #[test]
+    fn grid_coordinates_round_trip_and_grids_follow_the_magnitude() {
+        for k in [
+            [0, 0, 0],
+            [-16384, 16384, 7],
+            [12345, -1, -16384],
+            [1, 255, 256],
+        ] {
+            let (w1, w2) = pack_k(k);
+            assert!(w1 < 16_777_216.0 && w2 < 16_777_216.0);
+            assert_eq!(unpack_k(w1, w2), k);
+        }
+        assert_eq!(grid_exponent_for(1.0), Some(-GRID_BITS));
+        assert_eq!(grid_exponent_for(1.5), Some(1 - GRID_BITS));
+        assert_eq!(grid_exponent_for(0.0), None);
+        assert_eq!(grid_exponent_for(1e-12), None);
+        assert_eq!(grid_exponent_for(MAX_MAGNITUDE), Some(36 - GRID_BITS));
+        assert_eq!(grid_exponent_for(f64::NAN), None);
+    }
+
+    #[test]
+    fn exact_poses_choose_their_mode_or_refuse() {
+        let r = DMat3::from_quat(DQuat::from_rotation_z(0.3));
+        let t = DVec3::new(1.0, -2.0, 0.5);
+        // Grids close: mode 1; B's grid far below A's (or none): mode 2; A's far below B's or
+        // A without a grid: the rotated path.
+        assert_eq!(ExactPose::new(&r, t, Some(-14), Some(-10)).unwrap().mode, 1);
+        assert_eq!(ExactPose::new(&r, t, Some(-14), Some(-30)).unwrap().mode, 1);
+        assert_eq!(ExactPose::new(&r, t, Some(-14), Some(-31)).unwrap().mode, 2);
+        assert_eq!(ExactPose::new(&r, t, Some(-14), None).unwrap().mode, 2);
+        assert!(ExactPose::new(&r, t, Some(-50), Some(-3)).is_none());
+        assert!(ExactPose::new(&r, t, None, Some(-14)).is_none());
+        // W / f exactly: k_A = k_B = 0 leaves T = t / f.
+        let e = ExactPose::new(&r, t, Some(-14), Some(-14)).unwrap();
+        assert_eq!(e.w_units([0; 3], [0; 3])[0], 1i128 << 60);
+        // The words hold M and T limb by limb.
+        let w = e.words();
+        let m00 = w.m_lo[0][0] as i64 & 0xffff
+            | ((w.m_lo[0][0] >> 16) as i64) << 16
+            | (w.m_hi[0][0] as i64) << 32;
+        assert_eq!(m00, e.m[0][0]);
+        let t1 = (w.t01[1] & 0xffff) as i128
+            | ((w.t01[1] >> 16) as i128) << 16
+            | ((w.t23[1] & 0xffff) as i128) << 32
+            | ((w.t23[1] >> 16) as i128) << 48
+            | (w.t4[1] as i128) << 64;
+        assert_eq!(t1, e.t[1]);
+        assert_eq!(t1, -(1i128 << 61));
     }
 }

@@ -38,6 +38,12 @@ pub struct GpuCollision {
     pub gpu_refuted: usize,
     /// Pairs the GPU flagged uncertain, decided on the CPU with the exact test.
     pub uncertain: usize,
+    /// The triangle pass took the exact reference-point path for this body pair (the offset
+    /// `R c_B + t - c_A` of the triangles' reference points in integer arithmetic, see
+    /// [`GpuContext::set_exact_offsets`]); false: the rotated path (the option is off, or the
+    /// pair's integer ranges cannot hold: A's mesh below the grid's range, A's grid more than
+    /// 2^46 below B's, or a translation too large).
+    pub exact_offsets: bool,
     /// Node pairs the GPU tested (separating-axis tests), for the whole batch.
     pub node_pairs_tested: u64,
     /// Traversal levels that had work, for the whole batch.
@@ -444,8 +450,10 @@ fn timer_count(p: &Prepared) -> u32 {
 }
 
 /// The relative pose as the shader's `PairInfo`: rows of R, then t (f32, rounded to nearest;
-/// the shaders' error bounds include this rounding), then the meshes' arena bases.
-fn pair_info(frame: &RelativeFrame, a: &GpuMesh, b: &GpuMesh) -> PairInfo {
+/// the shaders' error bounds include this rounding), the meshes' arena bases, and the exact
+/// path's fixed-point pose ([`crate::pack::ExactPose`]) where `exact` and the pair's ranges
+/// allow it (else `fix.x = 0`: the rotated path).
+fn pair_info(frame: &RelativeFrame, a: &GpuMesh, b: &GpuMesh, exact: bool) -> PairInfo {
     let m = frame.m;
     let row = |k: usize| {
         [
@@ -455,12 +463,30 @@ fn pair_info(frame: &RelativeFrame, a: &GpuMesh, b: &GpuMesh) -> PairInfo {
             0.0,
         ]
     };
+    let words = exact
+        .then(|| crate::pack::ExactPose::new(&m, frame.t, a.grid, b.grid))
+        .flatten()
+        .map(|e| e.words())
+        .unwrap_or(crate::pack::ExactWords {
+            fix: [0, a.grid.unwrap_or(0), b.grid.unwrap_or(0), 0],
+            ..Default::default()
+        });
     PairInfo {
         r0: row(0),
         r1: row(1),
         r2: row(2),
         t: [frame.t.x as f32, frame.t.y as f32, frame.t.z as f32, 0.0],
         base: [a.node_base, a.tri_base, b.node_base, b.tri_base],
+        fix: words.fix,
+        m_lo0: words.m_lo[0],
+        m_lo1: words.m_lo[1],
+        m_lo2: words.m_lo[2],
+        m_hi0: words.m_hi[0],
+        m_hi1: words.m_hi[1],
+        m_hi2: words.m_hi[2],
+        t01: words.t01,
+        t23: words.t23,
+        t4: words.t4,
     }
 }
 
@@ -710,7 +736,7 @@ impl GpuContext {
                     limit: crate::pack::MAX_MAGNITUDE,
                 });
             }
-            p.infos.push(pair_info(&frame, a, b));
+            p.infos.push(pair_info(&frame, a, b, self.exact_offsets));
             p.frames.push(frame);
             p.tris.push((a.mesh.clone(), b.mesh.clone()));
             p.levels = p.levels.max(a.depth.max(b.depth));
@@ -933,7 +959,8 @@ impl GpuContext {
             }
         }
         sort_pairs(&mut results, entries.len() / 4)?;
-        for r in &mut results {
+        for (r, info) in results.iter_mut().zip(&p.infos) {
+            r.exact_offsets = info.fix[0] != 0;
             r.levels = answer.levels;
             r.node_pairs_tested = answer.node_pairs_tested;
             r.submissions = answer.submissions;

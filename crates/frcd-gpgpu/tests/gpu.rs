@@ -464,6 +464,108 @@ fn rechecking_only_uncertain_pairs_gives_the_oracles_pairs() {
     assert!(decided > 0 && uncertain > 0, "{decided} {uncertain}");
 }
 
+/// The triangle pass's exact reference-point path (the default: `W = R c_B + t - c_A` in integer
+/// arithmetic, only small offsets rotated in f32) leaves far fewer pairs uncertain than the
+/// rotated path on a scene with many touching pairs (icospheres through each other, at the
+/// origin and far from it), and both give the oracle's pairs.
+#[test]
+fn the_exact_path_leaves_far_fewer_uncertain_pairs() {
+    let Some(mut ctx) = new_context() else { return };
+    assert!(ctx.exact_offsets());
+    let a = body(&ctx, shapes::icosphere(1.0, 4));
+    let b = body(&ctx, shapes::icosphere(0.9, 4));
+    let far = DVec3::new(3.0e3, -1.0e3, 500.0);
+    let poses: Vec<(Pose, Pose)> = (0..6)
+        .map(|k| {
+            let s = k as f64 / 6.0;
+            let base = if k % 2 == 0 { DVec3::ZERO } else { far };
+            (
+                Pose::new(base, DQuat::from_rotation_y(0.3 * s)),
+                Pose::new(
+                    base + DVec3::new(0.4 + 1.2 * s, 0.11, -0.05),
+                    DQuat::from_rotation_z(0.9 * s) * DQuat::from_rotation_x(0.4),
+                ),
+            )
+        })
+        .collect();
+    let batch: Vec<_> = poses
+        .iter()
+        .map(|(pa, pb)| (&a.gpu, pa, &b.gpu, pb))
+        .collect();
+    let mut scratch = QueryScratch::default();
+    let exact = ctx.collide_batch(&batch, &mut scratch).unwrap();
+    ctx.set_exact_offsets(false);
+    let rotated = ctx.collide_batch(&batch, &mut scratch).unwrap();
+    let (mut touching, mut unc_exact, mut unc_rotated) = (0, 0, 0);
+    for (k, (pa, pb)) in poses.iter().enumerate() {
+        let want = oracle::pairs(&a.mesh, pa, &b.mesh, pb);
+        let (x, y) = (&exact.results[k], &rotated.results[k]);
+        assert_eq!(x.pairs, want, "pose {k}, exact path");
+        assert_eq!(y.pairs, want, "pose {k}, rotated path");
+        assert!(x.exact_offsets && !y.exact_offsets, "pose {k}");
+        assert_eq!((x.gpu_refuted, y.gpu_refuted), (0, 0));
+        touching += want.len();
+        unc_exact += x.uncertain;
+        unc_rotated += y.uncertain;
+    }
+    println!("{touching} touching pairs: uncertain {unc_rotated} rotated, {unc_exact} exact");
+    assert!(touching > 1000, "{touching}");
+    assert!(unc_rotated > 100, "{unc_rotated}");
+    assert!(
+        unc_exact * 10 <= unc_rotated,
+        "exact path: {unc_exact} uncertain, rotated: {unc_rotated}"
+    );
+}
+
+/// Pairs whose integer ranges cannot hold take the rotated path and still equal the oracle: A
+/// below the grid's range (1e-12 across: no grid, offsets are the vertices), and A 2^50 times
+/// smaller than B (A's grid more than 2^46 below B's). A large A with a small B takes the exact
+/// path's mode 2 (B rebuilt in f32, only `t - c_A` exact), also equal to the oracle.
+#[test]
+fn pairs_outside_the_exact_paths_ranges_take_the_rotated_path() {
+    let Some(ctx) = shared() else { return };
+    let tiny = body(ctx, shapes::icosphere(1.0e-12, 2));
+    let big = body(ctx, shapes::icosphere(1.0e4, 3));
+    let small = body(ctx, shapes::icosphere(1.0e-2, 2));
+    let huge = body(ctx, shapes::icosphere(1.0e6, 2));
+    let speck = body(ctx, shapes::icosphere(1.0e-9, 1));
+    let rot = DQuat::from_rotation_z(0.3) * DQuat::from_rotation_x(0.2);
+    // The speck at a vertex of the huge sphere.
+    let corner = huge.mesh.vertices()[0];
+    let cases: [(&Body, Pose, &Body, Pose, bool); 4] = [
+        (
+            &tiny,
+            Pose::IDENTITY,
+            &tiny,
+            Pose::new(DVec3::new(1.2e-12, 3e-13, 0.0), rot),
+            false,
+        ),
+        (&speck, Pose::new(corner, rot), &huge, Pose::IDENTITY, false),
+        (
+            &big,
+            Pose::IDENTITY,
+            &small,
+            Pose::new(DVec3::new(1.0e4, 2e-3, 0.0), rot),
+            true,
+        ),
+        (
+            &small,
+            Pose::new(DVec3::new(1.0e4, 2e-3, 0.0), rot),
+            &big,
+            Pose::IDENTITY,
+            true,
+        ),
+    ];
+    let mut scratch = QueryScratch::default();
+    for (k, (a, pa, b, pb, exact)) in cases.iter().enumerate() {
+        let got = ctx.collide(&a.gpu, pa, &b.gpu, pb, &mut scratch).unwrap();
+        let want = oracle::pairs(&a.mesh, pa, &b.mesh, pb);
+        assert!(!want.is_empty(), "case {k}");
+        assert_eq!(got.pairs, want, "case {k}");
+        assert_eq!(got.exact_offsets, *exact, "case {k}");
+    }
+}
+
 /// Pass timers: with them, a batch reports one GPU time per traversal level, the triangle pass
 /// and the whole chain (consistent with each other), and the same pairs as without them
 /// (also after an overflow re-run, whose timestamps come from the last run). Without them the

@@ -45,6 +45,22 @@ struct PairInfo {
     t: vec4<f32>,
     // A's first node, A's first triangle, B's first node, B's first triangle
     base: vec4<u32>,
+    // The triangle pass's exact path (traverse.wgsl, `exact_w`; frcd-gpgpu's `pack::ExactPose`):
+    // (path: 1 exact, 0 rotated; A's grid exponent; B's grid exponent; unused).
+    fix: vec4<i32>,
+    // R in fixed point M = round(R 2^46), column j, one row per component: M0 | M1 << 16 (its
+    // low 16-bit limbs) and M >> 32 (signed).
+    m_lo0: vec4<u32>,
+    m_lo1: vec4<u32>,
+    m_lo2: vec4<u32>,
+    m_hi0: vec4<i32>,
+    m_hi1: vec4<i32>,
+    m_hi2: vec4<i32>,
+    // t on the fine grid 2^(e_B - 46), T = round(t / 2^(e_B - 46)), per coordinate: T0 | T1 << 16,
+    // T2 | T3 << 16 (16-bit limbs) and T >> 64 (signed).
+    t01: vec4<u32>,
+    t23: vec4<u32>,
+    t4: vec4<i32>,
 }
 
 // ---- frcd-gpgpu: many-body box pass (boxes.wgsl) ----

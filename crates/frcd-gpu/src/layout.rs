@@ -61,6 +61,26 @@ pub struct PairInfo {
     pub t: [f32; 4],
     /// A's first node, A's first triangle, B's first node, B's first triangle.
     pub base: [u32; 4],
+    /// The triangle pass's exact path: (1 exact / 0 rotated, A's grid exponent, B's, unused).
+    pub fix: [i32; 4],
+    /// Column 0 of the fixed-point rotation `M = round(R 2^46)`: `M0 | M1 << 16` per row.
+    pub m_lo0: [u32; 4],
+    /// Column 1 of `M`, low limbs.
+    pub m_lo1: [u32; 4],
+    /// Column 2 of `M`, low limbs.
+    pub m_lo2: [u32; 4],
+    /// Column 0 of `M`: `M >> 32` per row.
+    pub m_hi0: [i32; 4],
+    /// Column 1 of `M`, high limbs.
+    pub m_hi1: [i32; 4],
+    /// Column 2 of `M`, high limbs.
+    pub m_hi2: [i32; 4],
+    /// `t` on the fine grid, `T0 | T1 << 16` per coordinate.
+    pub t01: [u32; 4],
+    /// `T2 | T3 << 16` per coordinate.
+    pub t23: [u32; 4],
+    /// `T >> 64` per coordinate.
+    pub t4: [i32; 4],
 }
 
 /// `BodyBox`: one body's world box for the box pass, outer and inner f32 corners.
@@ -162,7 +182,17 @@ pub fn mirrors() -> Vec<MirrorLayout> {
             r1: [f32; 4],
             r2: [f32; 4],
             t: [f32; 4],
-            base: [u32; 4]
+            base: [u32; 4],
+            fix: [i32; 4],
+            m_lo0: [u32; 4],
+            m_lo1: [u32; 4],
+            m_lo2: [u32; 4],
+            m_hi0: [i32; 4],
+            m_hi1: [i32; 4],
+            m_hi2: [i32; 4],
+            t01: [u32; 4],
+            t23: [u32; 4],
+            t4: [i32; 4]
         }),
         m!(BodyBox {
             lo_dn: [f32; 4],
