@@ -17,7 +17,7 @@
 //   node i: 5 texels  (c.xyz, eps) (a0.xyz, h0) (a1.xyz, h1) (a2.xyz, h2) (right, first, count, 0)
 //   triangle j (leaf order): 3 texels (o0.xyz, mesh index) (o1.xyz, k1) (o2.xyz, k2): the
 //   vertices' offsets o = v - c from a reference point c = k 2^e on the mesh's power-of-two grid
-//   (k an integer vector, |k_i| <= 2^14, packed into k1 and k2; e per mesh, in PairInfo.fix);
+//   (k an integer vector, |k_i| <= 2^13, packed into k1 and k2; e per mesh, in PairInfo.fix);
 //   see `triangles` and `exact_w`.
 // Node and triangle indices inside an item are relative to the mesh's base; item i lives at
 // row-major slot i of (layer, row, column group); see `slot`.
@@ -51,6 +51,10 @@ const WG: u32 = 64u;
 const U: f32 = 1.1920929e-7;
 const TAU: f32 = 1.1754944e-38;
 const UNCERTAIN_FLAG: u32 = 0x80000000u;
+// The triangles pipeline with the exact path compiled in (true) or the rotated path only (false:
+// a context with the exact path off, where the integer work would be dead weight; a software
+// driver would otherwise run it under masks). The traverse pipeline does not use it.
+override EXACT_PATH: bool = true;
 
 // State, Params, Arena and PairInfo come from the prelude (frcd-gpu).
 
@@ -296,29 +300,6 @@ fn tri_tri_core(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
     return tri_tri_3d(p1, q1, r1, p2, r2, q2, sp2, sr2, sq2, e);
 }
 
-// The rotated path: triangle A (p1, q1, r1) and B (pb, qb, rb) rebuilt from their offsets and
-// reference points (p = o + c in f32; c = k 2^e is exact), B mapped by the f32 pose
-// (rot(pb) + t). Per-coordinate distance from the f64 points the exact test sees: A: offset
-// stored rounded to nearest (f64 subtraction, then f32: U/2 (1 + 2^-28) |o|), the sum o + c
-// (U |p|), or flushed (TAU each): U (|p_A| + 0.5 |o_A|) + 2 TAU. B: that storage error
-// (0.5 U |o_B| + U |pb| per coordinate), carried through a row of R (|R_i|_1 <= 3 in this bound):
-// 1.5 U |o_B| + 3 U |pb|; R and t rounded (U/2 |pb|_1, U/2 |t|); rot() + t (gamma_4 (|pb|_1 +
-// |t|), |pb|_1 <= 3 |pb|_inf): <= U (16.5 |pb| + 1.5 |o_B| + 4.5 |t|), plus flushes (the offset,
-// the sum, the rotation: <= 14 TAU through R). The (1 + U) factors of these first-order terms
-// are inside the final 1.01.
-fn tri_tri_rotated(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
-                   pb: vec3<f32>, qb: vec3<f32>, rb: vec3<f32>, oa_mag: f32, ob_mag: f32) -> u32 {
-    let p2 = rot(pb) + pose.t.xyz;
-    let q2 = rot(qb) + pose.t.xyz;
-    let r2 = rot(rb) + pose.t.xyz;
-    let pa_mag = max(maxabs(p1), max(maxabs(q1), maxabs(r1)));
-    let pb_mag = max(maxabs(pb), max(maxabs(qb), maxabs(rb)));
-    let delta = (max(U * (pa_mag + 0.5 * oa_mag),
-                     U * (17.0 * pb_mag + 2.0 * ob_mag + 5.0 * maxabs(pose.t.xyz)))
-        + 16.0 * TAU) * 1.01;
-    return tri_tri_core(p1, q1, r1, p2, q2, r2, delta);
-}
-
 // ---- the exact path: W = R c_B + t - c_A in integer arithmetic ----
 //
 // The CPU gives R in fixed point, M = round(R 2^46) (|M / 2^46 - R| <= 2^-47 per entry), and t on
@@ -326,18 +307,25 @@ fn tri_tri_rotated(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
 // (PairInfo.m_*, t01, t23, t4; `pack::ExactPose`). With c_A = k_A 2^(e_A), c_B = k_B 2^(e_B),
 //   W_int / f = M k_B + T - k_A 2^(e_A - e_B + 46)
 // is an integer, computed here exactly: WGSL's i32 and u32 arithmetic is exact (wrapping) under
-// every float rule, and every partial below stays far inside i32. Products are 16 x 16 bits
-// (M's limbs times k_B, |k_B| < 2^15: below 2^31), split into 16-bit limbs and accumulated per
-// limb (five limbs, weights 2^0 .. 2^64, each sum below 2^20), then carries are propagated
-// (arithmetic shifts). A negative value is negated limb by limb. The magnitude (below 2^79:
+// every float rule, and every partial below stays inside i32. Products are 16 x 14 bits (M's
+// 16-bit limbs times k_B, |k_B| <= 2^13: below 2^29), summed per limb of M (three products:
+// below 2^30.6) onto T's 16-bit limbs (five limbs, weights 2^0 .. 2^64), A's term subtracted as
+// two 16-bit pieces, then carries are propagated (arithmetic shifts). A negative value is negated limb by limb. The magnitude (below 2^79:
 // |T| < 2^78, |k_A 2^sa| <= 2^76, |M k_B| < 2^62) is converted to f32 once: its top 32 bits (the
 // bits below are dropped: relative error < 2^-31) converted by f32() (one rounding, either
-// direction: U), scaled by ldexp (exact: the result is 0 or >= f >= 2^-96, as the CPU keeps
+// direction: U), scaled by a power of two (exact: the result is 0 or >= f >= 2^-96, as the CPU keeps
 // e_A, e_B >= -50, and below 2^79 f <= 2^56). So
 //   |W_f32 - W_int| <= (U + 2^-31)(1 + U) |W_int| <= 1.02 U |W_f32|.
 const M16: vec3<i32> = vec3<i32>(0xffff, 0xffff, 0xffff);
 const S16: vec3<u32> = vec3<u32>(16u, 16u, 16u);
 const ZERO3: vec3<i32> = vec3<i32>(0, 0, 0);
+
+// 2^e for e in [-126, 127], built from its bits (ldexp is a long sequence on some drivers);
+// products with it are exact wherever the results below use them (normal or zero). Out of
+// that range (only on the path a `select` discards) the bits are some other float.
+fn pow2(e: vec3<i32>) -> vec3<f32> {
+    return bitcast<vec3<f32>>(vec3<u32>(e + vec3<i32>(127)) << vec3<u32>(23u));
+}
 
 // A five-limb integer per coordinate, limb i of weight 2^(16 i).
 struct Limbs {
@@ -366,19 +354,6 @@ fn carry(x: Limbs) -> Limbs {
     return o;
 }
 
-// Adds column j of M (low limbs packed M0 | M1 << 16, high limb M >> 32) times k_B[j].
-fn mac_column(x: Limbs, lo: vec3<u32>, hi: vec3<i32>, k: i32) -> Limbs {
-    var o = x;
-    let p0 = vec3<i32>(lo & vec3<u32>(0xffffu)) * k;
-    let p1 = vec3<i32>(lo >> S16) * k;
-    let p2 = hi * k;
-    o.l0 = o.l0 + (p0 & M16);
-    o.l1 = o.l1 + (p0 >> S16) + (p1 & M16);
-    o.l2 = o.l2 + (p1 >> S16) + (p2 & M16);
-    o.l3 = o.l3 + (p2 >> S16);
-    return o;
-}
-
 // A triangle's grid coordinates (`pack::pack_k`: 16 bits each, biased by 2^15).
 fn unpack_k(w1: f32, w2: f32) -> vec3<i32> {
     let a = u32(w1);
@@ -388,17 +363,29 @@ fn unpack_k(w1: f32, w2: f32) -> vec3<i32> {
 }
 
 // W / f = M k_B + T - k_A 2^sa as f32 times f = 2^ef (xyz, one rounding) and 1 in w (0: out of
-// range, which the CPU's ranges rule out). sa in [0, 62], ef >= -96 (`pack::ExactPose`).
-fn exact_w(ka: vec3<i32>, kb: vec3<i32>, sa: i32, ef: i32) -> vec4<f32> {
+// range, which the CPU's ranges rule out), for body pair pi (its limbs are read here).
+// sa in [0, 62], ef >= -96 (`pack::ExactPose`).
+fn exact_w(pi: u32, ka: vec3<i32>, kb: vec3<i32>, sa: i32, ef: i32) -> vec4<f32> {
     var x: Limbs;
-    x.l0 = vec3<i32>(pose.t01.xyz & vec3<u32>(0xffffu));
-    x.l1 = vec3<i32>(pose.t01.xyz >> S16);
-    x.l2 = vec3<i32>(pose.t23.xyz & vec3<u32>(0xffffu));
-    x.l3 = vec3<i32>(pose.t23.xyz >> S16);
-    x.l4 = pose.t4.xyz;
-    x = mac_column(x, pose.m_lo0.xyz, pose.m_hi0.xyz, kb.x);
-    x = mac_column(x, pose.m_lo1.xyz, pose.m_hi1.xyz, kb.y);
-    x = mac_column(x, pose.m_lo2.xyz, pose.m_hi2.xyz, kb.z);
+    let t01 = pairs[pi].t01.xyz;
+    let t23 = pairs[pi].t23.xyz;
+    x.l0 = vec3<i32>(t01 & vec3<u32>(0xffffu));
+    x.l1 = vec3<i32>(t01 >> S16);
+    x.l2 = vec3<i32>(t23 & vec3<u32>(0xffffu));
+    x.l3 = vec3<i32>(t23 >> S16);
+    x.l4 = pairs[pi].t4.xyz;
+    // M k_B per limb of M (|k_B| <= 2^13: each product below 2^29, each sum of three below
+    // 2^30.6), added to T's limbs unsplit; the carries below spread them.
+    let m0 = pairs[pi].m_lo0.xyz;
+    let m1 = pairs[pi].m_lo1.xyz;
+    let m2 = pairs[pi].m_lo2.xyz;
+    let lo16 = vec3<u32>(0xffffu);
+    x.l0 = x.l0 + vec3<i32>(m0 & lo16) * kb.x + vec3<i32>(m1 & lo16) * kb.y
+        + vec3<i32>(m2 & lo16) * kb.z;
+    x.l1 = x.l1 + vec3<i32>(m0 >> S16) * kb.x + vec3<i32>(m1 >> S16) * kb.y
+        + vec3<i32>(m2 >> S16) * kb.z;
+    x.l2 = x.l2 + pairs[pi].m_hi0.xyz * kb.x + pairs[pi].m_hi1.xyz * kb.y
+        + pairs[pi].m_hi2.xyz * kb.z;
     // - k_A 2^sa, sa = 16 q + r in [0, 62]: k_A 2^r (|.| < 2^30) split at limb q.
     let q = sa >> 4u;
     let ks = ka * (1 << u32(sa & 15));
@@ -431,10 +418,23 @@ fn exact_w(ka: vec3<i32>, kb: vec3<i32>, sa: i32, ef: i32) -> vec4<f32> {
     // Top 32 bits: hi = 0: lo itself; else shifted so hi's leading bit is bit 31.
     let n1 = select(firstLeadingBit(hi) + vec3<u32>(1u), vec3<u32>(0u), hi == vec3<u32>(0u));
     let top = (hi << ((vec3<u32>(32u) - n1) & vec3<u32>(31u))) | (lo >> n1);
-    let m = ldexp(vec3<f32>(top), vec3<i32>(n1) + e0);
+    let m = vec3<f32>(top) * pow2(vec3<i32>(n1) + e0);
     return vec4<f32>(select(m, -m, neg), select(0.0, 1.0, ok));
 }
 
+// ---- the triangle pass's two paths ----
+//
+// The rotated path: triangle A (p1, q1, r1) and B (pb, qb, rb) rebuilt from their offsets and
+// reference points (p = o + c in f32; c = k 2^e is exact), B mapped by the f32 pose
+// (rot(pb) + t). Per-coordinate distance from the f64 points the exact test sees: A: offset
+// stored rounded to nearest (f64 subtraction, then f32: U/2 (1 + 2^-28) |o|), the sum o + c
+// (U |p|), or flushed (TAU each): U (|p_A| + 0.5 |o_A|) + 2 TAU. B: that storage error
+// (0.5 U |o_B| + U |pb| per coordinate), carried through a row of R (|R_i|_1 <= 3 in this bound):
+// 1.5 U |o_B| + 3 U |pb|; R and t rounded (U/2 |pb|_1, U/2 |t|); rot() + t (gamma_4 (|pb|_1 +
+// |t|), |pb|_1 <= 3 |pb|_inf): <= U (16.5 |pb| + 1.5 |o_B| + 4.5 |t|), plus flushes (the offset,
+// the sum, the rotation: <= 14 TAU through R). The (1 + U) factors of these first-order terms
+// are inside the final 1.01.
+//
 // The exact path: A's offsets o_A; B's points pb rotated by the f32 R, plus W; all relative to
 // c_A. Mode 1: pb = o_B (B's offsets), W = R c_B + t - c_A. Mode 2 (B small next to A, see
 // `pack::ExactPose`): pb = o_B + c_B rebuilt in f32, W = t - c_A (c_B's term is then k_B = 0).
@@ -460,20 +460,59 @@ fn exact_w(ka: vec3<i32>, kb: vec3<i32>, sa: i32, ef: i32) -> vec4<f32> {
 //   (cp, co) = (16, 0) in mode 1, (17, 2) in mode 2. |o|, |W| and f are leaf-sized, not
 //   mesh-sized (mode 2: |pb| is B's size, small next to A's), and the terms in |c_B| and |t|
 //   are ~2^-23 U of the mesh.
-fn tri_tri_exact(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
-                 pb: vec3<f32>, qb: vec3<f32>, rb: vec3<f32>, w: vec3<f32>, kb: vec3<i32>,
-                 ef: i32, ob_mag: f32, mode2: bool) -> u32 {
-    let p2 = rot(pb) + w;
-    let q2 = rot(qb) + w;
-    let r2 = rot(rb) + w;
-    let oa_mag = max(maxabs(p1), max(maxabs(q1), maxabs(r1)));
+//
+// Both paths run as one sequence of operations with the path's operands chosen by `select`
+// (a software driver such as llvmpipe runs both sides of a branch that varies across lanes
+// under masks: two branches made this pass about 2x slower there), in the order of the
+// formulas above: A = o_A (exact) or o_A + c_A (rotated); B's points pb = o_B (mode 1) or
+// o_B + c_B (mode 2, rotated), mapped by rot(pb) + W (exact) or + t (rotated); one delta,
+//   max(U (ca |p_A| + 0.5 |o_A|), U (cp |pb| + co |o_B| + cw |W or t|) + far) + 16 TAU,
+// (ca, cp, co, cw) = (0, 16, 0, 3) mode 1, (0, 17, 2, 3) mode 2, (1, 17, 2, 5) rotated, far 0
+// on the rotated path; times 1.01.
+fn tri_pair(pi: u32, a0: vec4<f32>, a1: vec4<f32>, a2: vec4<f32>,
+            b0: vec4<f32>, b1: vec4<f32>, b2: vec4<f32>) -> u32 {
+    let ka = unpack_k(a1.w, a2.w);
+    let kb = unpack_k(b1.w, b2.w);
+    let rotated = !EXACT_PATH || pose.fix.x == 0;
+    let mode2 = pose.fix.x == 2;
+    // Mode 1: fine grid 2^(e_B - 46); mode 2: 2^(e_A - 46) and k_B's term 0.
+    let sa = select(pose.fix.y - pose.fix.z + 46, 46, mode2);
+    let ef = select(pose.fix.z - 46, pose.fix.y - 46, mode2);
+    let kbx = select(kb, ZERO3, mode2);
+    var w = vec4<f32>(0.0);
+    if EXACT_PATH {
+        w = exact_w(pi, ka, kbx, sa, ef);
+    }
+    // c = k 2^e, exact (|k| <= 2^13, e >= -50, or k = 0).
+    let ca = vec3<f32>(ka) * pow2(vec3<i32>(pose.fix.y)).x;
+    let cb = vec3<f32>(kb) * pow2(vec3<i32>(pose.fix.z)).x;
+    let add_cb = rotated || mode2;
+    let p1 = select(a0.xyz, a0.xyz + ca, rotated);
+    let q1 = select(a1.xyz, a1.xyz + ca, rotated);
+    let r1 = select(a2.xyz, a2.xyz + ca, rotated);
+    let pb = select(b0.xyz, b0.xyz + cb, add_cb);
+    let qb = select(b1.xyz, b1.xyz + cb, add_cb);
+    let rb = select(b2.xyz, b2.xyz + cb, add_cb);
+    let shift = select(w.xyz, pose.t.xyz, rotated);
+    let p2 = rot(pb) + shift;
+    let q2 = rot(qb) + shift;
+    let r2 = rot(rb) + shift;
+    let oa_mag = max(maxabs(a0.xyz), max(maxabs(a1.xyz), maxabs(a2.xyz)));
+    let ob_mag = max(maxabs(b0.xyz), max(maxabs(b1.xyz), maxabs(b2.xyz)));
+    let pa_mag = max(maxabs(p1), max(maxabs(q1), maxabs(r1)));
     let pb_mag = max(maxabs(pb), max(maxabs(qb), maxabs(rb)));
-    let cp = select(16.0, 17.0, mode2);
-    let co = select(0.0, 2.0, mode2);
-    let far = ldexp(l1(vec3<f32>(kb)) + 0.5, ef) + 1.4210855e-14 * maxabs(pose.t.xyz);
-    let delta = (max(0.5 * U * oa_mag, U * (cp * pb_mag + co * ob_mag + 3.0 * maxabs(w)) + far)
+    let c_a = select(0.0, 1.0, rotated);
+    let cp = select(16.0, 17.0, add_cb);
+    let co = select(0.0, 2.0, add_cb);
+    let cw = select(3.0, 5.0, rotated);
+    let far = select((l1(vec3<f32>(kbx)) + 0.5) * pow2(vec3<i32>(ef)).x + 1.4210855e-14 * maxabs(pose.t.xyz),
+                     0.0, rotated);
+    let delta = (max(U * (c_a * pa_mag + 0.5 * oa_mag),
+                     U * (cp * pb_mag + co * ob_mag + cw * maxabs(shift)) + far)
         + 16.0 * TAU) * 1.01;
-    return tri_tri_core(p1, q1, r1, p2, q2, r2, delta);
+    let r = tri_tri_core(p1, q1, r1, p2, q2, r2, delta);
+    // W out of range (ruled out by the CPU's ranges): uncertain.
+    return select(r, TRI_UNCERTAIN, !rotated && w.w == 0.0);
 }
 
 // Appends every triangle pair of two overlapping leaves to the triangle list (past its capacity
@@ -503,7 +542,13 @@ fn triangles(@builtin(workgroup_id) wid: vec3<u32>,
         return;
     }
     let entry = frontier_in[idx];
-    pose = pairs[entry.x];
+    // Field by field; the exact path's limbs are read by `exact_w`.
+    pose.r0 = pairs[entry.x].r0;
+    pose.r1 = pairs[entry.x].r1;
+    pose.r2 = pairs[entry.x].r2;
+    pose.t = pairs[entry.x].t;
+    pose.base = pairs[entry.x].base;
+    pose.fix = pairs[entry.x].fix;
     let lay = arena.tri_layout;
     let sa = slot(lay, 3u, pose.base.y + entry.y);
     let sb = slot(lay, 3u, pose.base.w + entry.z);
@@ -513,31 +558,7 @@ fn triangles(@builtin(workgroup_id) wid: vec3<u32>,
     let b0 = texel(tris, sb, 0u);
     let b1 = texel(tris, sb, 1u);
     let b2 = texel(tris, sb, 2u);
-    let ka = unpack_k(a1.w, a2.w);
-    let kb = unpack_k(b1.w, b2.w);
-    var r = TRI_UNCERTAIN;
-    let ob_mag = max(maxabs(b0.xyz), max(maxabs(b1.xyz), maxabs(b2.xyz)));
-    if pose.fix.x != 0 {
-        // Mode 1: fine grid 2^(e_B - 46); mode 2: 2^(e_A - 46), B rebuilt, k_B's term 0.
-        let mode2 = pose.fix.x == 2;
-        let sa = select(pose.fix.y - pose.fix.z + 46, 46, mode2);
-        let ef = select(pose.fix.z - 46, pose.fix.y - 46, mode2);
-        let kbx = select(kb, ZERO3, mode2);
-        let w = exact_w(ka, kbx, sa, ef);
-        if w.w != 0.0 {
-            // c_B = k_B 2^(e_B), exact; added in mode 2 only.
-            let cb = select(vec3<f32>(0.0), ldexp(vec3<f32>(kb), vec3<i32>(pose.fix.z)), mode2);
-            r = tri_tri_exact(a0.xyz, a1.xyz, a2.xyz, b0.xyz + cb, b1.xyz + cb, b2.xyz + cb,
-                              w.xyz, kbx, ef, ob_mag, mode2);
-        }
-    } else {
-        // c = k 2^e, exact (|k| < 2^15, e >= -50, or k = 0).
-        let ca = ldexp(vec3<f32>(ka), vec3<i32>(pose.fix.y));
-        let cb = ldexp(vec3<f32>(kb), vec3<i32>(pose.fix.z));
-        let oa_mag = max(maxabs(a0.xyz), max(maxabs(a1.xyz), maxabs(a2.xyz)));
-        r = tri_tri_rotated(a0.xyz + ca, a1.xyz + ca, a2.xyz + ca,
-                            b0.xyz + cb, b1.xyz + cb, b2.xyz + cb, oa_mag, ob_mag);
-    }
+    let r = tri_pair(entry.x, a0, a1, a2, b0, b1, b2);
     if r != TRI_DISJOINT {
         let o = atomicAdd(&state.out, 1u);
         if o < params.caps.y {

@@ -87,6 +87,21 @@ pub enum Recheck {
     Uncertain,
 }
 
+/// Environment variable that overrides the default of [`GpuContext::set_exact_offsets`] for
+/// new contexts: `1` on, `0` off (for measurements through programs that do not call it).
+pub const EXACT_OFFSETS_ENV: &str = "FRCD_GPGPU_EXACT_OFFSETS";
+
+/// The exact path's default for a new context: on for hardware adapters, off for software ones
+/// (on lavapipe its integer work made the triangle pass about twice as long, more than the CPU
+/// re-decision it saves there; see docs/performance/gpu.md), unless [`EXACT_OFFSETS_ENV`] says.
+fn exact_offsets_default(info: &wgpu::AdapterInfo) -> bool {
+    match std::env::var(EXACT_OFFSETS_ENV).as_deref() {
+        Ok("1") => true,
+        Ok("0") => false,
+        _ => info.device_type != wgpu::DeviceType::Cpu,
+    }
+}
+
 /// The compute pipelines and layouts, made once per context.
 pub(crate) struct Pipelines {
     pub arena_bgl: wgpu::BindGroupLayout,
@@ -94,8 +109,11 @@ pub(crate) struct Pipelines {
     pub ctrl_bgl: wgpu::BindGroupLayout,
     pub boxes_bgl: wgpu::BindGroupLayout,
     pub traverse: wgpu::ComputePipeline,
-    /// traverse.wgsl's triangle pass (one listed triangle pair per invocation).
+    /// traverse.wgsl's triangle pass (one listed triangle pair per invocation), with the exact
+    /// path compiled in.
     pub triangles: wgpu::ComputePipeline,
+    /// The triangle pass with the rotated path only (`EXACT_PATH = false`).
+    pub triangles_rotated: wgpu::ComputePipeline,
     pub init: wgpu::ComputePipeline,
     pub prepare: wgpu::ComputePipeline,
     /// control.wgsl's arguments of the triangle pass.
@@ -276,6 +294,7 @@ impl GpuContext {
         arena: &crate::ArenaOptions,
     ) -> Result<Self, GpuError> {
         let info = device.adapter_info();
+        let exact_offsets = exact_offsets_default(&info);
         let limits = device.limits();
         check_limits(&limits, &info.name)?;
         // A driver that rejects a shader or pipeline gives a typed error, not a panic.
@@ -314,7 +333,7 @@ impl GpuContext {
             readbacks: AtomicU64::new(0),
             pass_timers: false,
             recheck: Recheck::All,
-            exact_offsets: true,
+            exact_offsets,
             _release: frcd_gpu::ReleaseCreationLock::default(),
         })
     }
@@ -374,14 +393,17 @@ impl GpuContext {
         self.recheck
     }
 
-    /// Turns the triangle pass's exact reference-point path on (the default) or off. On, each
+    /// Turns the triangle pass's exact reference-point path on or off (default: on for hardware
+    /// adapters, off for software ones such as lavapipe, where it costs more than it saves;
+    /// [`EXACT_OFFSETS_ENV`] overrides the default). On, each
     /// body pair whose integer ranges hold computes `W = R c_B + t - c_A` (the triangles'
     /// reference points, see `pack`'s module docs) exactly in integer arithmetic and rotates
     /// only the small vertex offsets in f32, so its error bound scales with the triangles, not
     /// the meshes: far fewer uncertain pairs. Off (or where the ranges cannot hold), every pair
     /// takes the rotated path (B's vertices rotated into A's frame in f32).
     /// [`crate::GpuCollision::exact_offsets`] says which path a pair took. Answers are the same
-    /// either way.
+    /// either way (the exact CPU oracle's). Each path has its own triangle pipeline (the integer
+    /// work is compiled out of the rotated one).
     pub fn set_exact_offsets(&mut self, on: bool) {
         self.exact_offsets = on;
     }
@@ -602,19 +624,28 @@ impl Pipelines {
         let ctrl_layout = layout("frcd-gpgpu control", &[&ctrl_bgl]);
         let boxes_layout = layout("frcd-gpgpu boxes", &[&boxes_bgl]);
         let sweep_layout = layout("frcd-gpgpu sweep", &[&sweep_bgl]);
-        let pipeline = |label: &str,
-                        layout: &wgpu::PipelineLayout,
-                        module: &wgpu::ShaderModule,
-                        entry: &str| {
+        let specialized = |label: &str,
+                           layout: &wgpu::PipelineLayout,
+                           module: &wgpu::ShaderModule,
+                           entry: &str,
+                           constants: &[(&str, f64)]| {
             device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some(label),
                 layout: Some(layout),
                 module,
                 entry_point: Some(entry),
-                compilation_options: Default::default(),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants,
+                    ..Default::default()
+                },
                 cache: None,
             })
         };
+        let pipeline =
+            |label: &str,
+             layout: &wgpu::PipelineLayout,
+             module: &wgpu::ShaderModule,
+             entry: &str| specialized(label, layout, module, entry, &[]);
         Self {
             traverse: pipeline(
                 "frcd-gpgpu traverse",
@@ -627,6 +658,13 @@ impl Pipelines {
                 &trav_layout,
                 &traverse_mod,
                 "triangles",
+            ),
+            triangles_rotated: specialized(
+                "frcd-gpgpu triangles (rotated path)",
+                &trav_layout,
+                &traverse_mod,
+                "triangles",
+                &[("EXACT_PATH", 0.0)],
             ),
             init: pipeline("frcd-gpgpu init", &ctrl_layout, &control_mod, "init"),
             prepare: pipeline("frcd-gpgpu prepare", &ctrl_layout, &control_mod, "prepare"),

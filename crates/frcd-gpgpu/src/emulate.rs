@@ -449,6 +449,15 @@ fn ldexp(x: f32, e: i32) -> f32 {
     r
 }
 
+/// The shader's one delta of `tri_pair`: `max(U (c_a |p_A| + 0.5 |o_A|), U (cp |pb| + co |o_B| +
+/// cw |W or t|) + far) + 16 TAU`, times 1.01; `a = [c_a, |p_A|, |o_A|]`, `b = [cp, |pb|, co,
+/// |o_B|, cw, |W or t|]`.
+fn pair_delta(a: [f32; 3], b: [f32; 6], far: f32) -> f32 {
+    let da = mul(U, mad(0.5, a[2], mul(a[0], a[1])));
+    let db = mad(U, mad(b[4], b[5], mad(b[2], b[3], mul(b[0], b[1]))), far);
+    mul(add(da.max(db), mul(16.0, TAU)), 1.01)
+}
+
 /// A triangle as the triangle pass loads it: offsets from its reference point and the point's
 /// grid coordinates.
 #[derive(Clone, Copy, Debug)]
@@ -484,17 +493,21 @@ pub(crate) fn exact_w(ep: &crate::pack::ExactPose, ka: [i64; 3], kb: [i64; 3]) -
             (w.t23[i] >> 16) as i32,
             w.t4[i],
         ];
-        for (j, &kbj) in kb.iter().enumerate() {
-            let k = i32::try_from(kbj).unwrap();
-            let (lo, hi) = (w.m_lo[j][i], w.m_hi[j][i]);
-            let p0 = ck(((lo & 0xffff) as i32).checked_mul(k));
-            let p1 = ck(((lo >> 16) as i32).checked_mul(k));
-            let p2 = ck(hi.checked_mul(k));
-            let add = |x: i32, ys: &[i32]| ys.iter().fold(x, |a, &y| ck(a.checked_add(y)));
-            l[0] = add(l[0], &[p0 & 0xffff]);
-            l[1] = add(l[1], &[p0 >> 16, p1 & 0xffff]);
-            l[2] = add(l[2], &[p1 >> 16, p2 & 0xffff]);
-            l[3] = add(l[3], &[p2 >> 16]);
+        // M k_B per limb of M, summed onto T's limbs unsplit (as the shader).
+        let k = kb.map(|x| i32::try_from(x).unwrap());
+        assert!(k.iter().all(|x| x.abs() <= 1 << crate::pack::GRID_BITS));
+        let limb = |l: usize, j: usize| -> i32 {
+            let lo = w.m_lo[j][i];
+            match l {
+                0 => (lo & 0xffff) as i32,
+                1 => (lo >> 16) as i32,
+                _ => w.m_hi[j][i],
+            }
+        };
+        for (l, x) in l.iter_mut().enumerate().take(3) {
+            for (j, &kj) in k.iter().enumerate() {
+                *x = ck(x.checked_add(ck(limb(l, j).checked_mul(kj))));
+            }
         }
         let q = (sa >> 4) as usize;
         let ks = ck(i32::try_from(ka[i]).unwrap().checked_mul(1 << (sa & 15)));
@@ -564,20 +577,11 @@ pub(crate) fn tri_tri_exact(p: &PoseF, ep: &crate::pack::ExactPose, a: &TriOff, 
     let pb_mag = maxabs(pb).max(maxabs(qb).max(maxabs(rb)));
     let (cp, co) = if mode2 { (17.0, 2.0) } else { (16.0, 0.0) };
     let kb = v3(kbx[0] as f32, kbx[1] as f32, kbx[2] as f32);
-    let far = add(
-        ldexp(add(l1(kb), 0.5), ef),
-        mul(2f32.powi(-46), maxabs(p.t)),
-    );
-    let delta = mul(
-        add(
-            mul(mul(0.5, U), oa_mag).max(mad(
-                U,
-                add(add(mul(cp, pb_mag), mul(co, ob_mag)), mul(3.0, maxabs(w))),
-                far,
-            )),
-            mul(16.0, TAU),
-        ),
-        1.01,
+    let far = mad(2f32.powi(-46), maxabs(p.t), ldexp(add(l1(kb), 0.5), ef));
+    let delta = pair_delta(
+        [0.0, oa_mag, oa_mag],
+        [cp, pb_mag, co, ob_mag, 3.0, maxabs(w)],
+        far,
     );
     tri_tri_core([p1, q1, r1], [p2, q2, r2], delta)
 }
@@ -602,18 +606,10 @@ pub(crate) fn tri_tri_rotated(p: &PoseF, ea: i32, eb: i32, a: &TriOff, b: &TriOf
     let r2 = rot(p, rb).add(p.t);
     let pa_mag = maxabs(p1).max(maxabs(q1).max(maxabs(r1)));
     let pb_mag = maxabs(pb).max(maxabs(qb).max(maxabs(rb)));
-    let delta = mul(
-        add(
-            mul(U, mad(0.5, oa_mag, pa_mag)).max(mul(
-                U,
-                add(
-                    add(mul(17.0, pb_mag), mul(2.0, ob_mag)),
-                    mul(5.0, maxabs(p.t)),
-                ),
-            )),
-            mul(16.0, TAU),
-        ),
-        1.01,
+    let delta = pair_delta(
+        [1.0, pa_mag, oa_mag],
+        [17.0, pb_mag, 2.0, ob_mag, 5.0, maxabs(p.t)],
+        0.0,
     );
     tri_tri_core([p1, q1, r1], [p2, q2, r2], delta)
 }

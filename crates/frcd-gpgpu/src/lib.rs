@@ -65,7 +65,7 @@ pub mod shaders;
 mod sweep;
 
 pub use boxes::{BodyPairs, BoxScratch};
-pub use context::{GpuContext, HeadlessOptions, Recheck, requirements};
+pub use context::{EXACT_OFFSETS_ENV, GpuContext, HeadlessOptions, Recheck, requirements};
 pub use error::GpuError;
 pub use mesh::{ArenaOptions, GpuMesh, MAX_LEAF_TRIANGLES};
 pub use pack::{MAX_MAGNITUDE, TexLayout};

@@ -50,7 +50,7 @@ pub const MAX_MAGNITUDE: f64 = 68_719_476_736.0;
 /// Fewest texture array layers a packed texture gets (see [`TexLayout::new`]).
 pub const MIN_LAYERS: u32 = 2;
 /// Grid coordinates of triangle reference points are at most `2^GRID_BITS` in magnitude.
-pub const GRID_BITS: i32 = 14;
+pub const GRID_BITS: i32 = 13;
 /// Smallest grid exponent a mesh gets (smaller meshes store their vertices, `k = 0`): the
 /// triangle pass's fine grid `2^(e_B - R_FRAC_BITS)` must stay a normal f32 (>= 2^-96 here).
 pub const GRID_MIN_EXP: i32 = -50;

@@ -355,6 +355,8 @@ struct Prepared {
     levels: u32,
     /// Most triangle pairs one leaf pair of the batch lists.
     leaf_pairs: u64,
+    /// The triangle pass's exact path is on ([`GpuContext::set_exact_offsets`]).
+    exact: bool,
 }
 
 /// One reported triangle pair after the CPU's exact test.
@@ -712,6 +714,7 @@ impl GpuContext {
             tris: Vec::with_capacity(pairs.len()),
             levels: 0,
             leaf_pairs: 0,
+            exact: self.exact_offsets,
         };
         for (k, &(a, pose_a, b, pose_b)) in pairs.iter().enumerate() {
             for m in [a, b] {
@@ -824,7 +827,11 @@ impl GpuContext {
             pass.set_pipeline(&self.pipes.prepare_tris);
             pass.set_bind_group(0, &bufs.ctrl_bg, &[]);
             pass.dispatch_workgroups(1, 1, 1);
-            pass.set_pipeline(&self.pipes.triangles);
+            pass.set_pipeline(if p.exact {
+                &self.pipes.triangles
+            } else {
+                &self.pipes.triangles_rotated
+            });
             pass.set_bind_group(0, &arena_bg, &[]);
             pass.set_bind_group(1, &bufs.tri_bg, &[]);
             pass.dispatch_workgroups_indirect(&bufs.args, 0);

@@ -16,9 +16,15 @@ fn require_gpu() -> bool {
     std::env::var("FRCD_REQUIRE_GPU").is_ok_and(|v| v == "1")
 }
 
+/// A context with the triangle pass's exact path on (its default on hardware adapters; the
+/// software adapter these tests usually run on defaults to the rotated path), so every test
+/// below checks the exact path against the oracle; the rotated path has its own tests.
 fn new_context() -> Option<GpuContext> {
     match GpuContext::headless() {
-        Ok(c) => Some(c),
+        Ok(mut c) => {
+            c.set_exact_offsets(true);
+            Some(c)
+        }
         Err(e) => {
             assert!(
                 !require_gpu(),
@@ -564,6 +570,43 @@ fn pairs_outside_the_exact_paths_ranges_take_the_rotated_path() {
         assert_eq!(got.pairs, want, "case {k}");
         assert_eq!(got.exact_offsets, *exact, "case {k}");
     }
+}
+
+/// The exact path's default: on for hardware adapters, off for software ones (where its integer
+/// work costs more than it saves), unless `FRCD_GPGPU_EXACT_OFFSETS` says; the rotated path (the
+/// other pipeline) gives the oracle's pairs on the same scene as the exact one.
+#[test]
+fn the_exact_paths_default_follows_the_adapter() {
+    let ctx = match GpuContext::headless() {
+        Ok(c) => c,
+        Err(e) => {
+            assert!(!require_gpu(), "{e}");
+            return;
+        }
+    };
+    let want = match std::env::var(frcd_gpgpu::EXACT_OFFSETS_ENV).as_deref() {
+        Ok("1") => true,
+        Ok("0") => false,
+        _ => !ctx.is_software(),
+    };
+    assert_eq!(ctx.exact_offsets(), want);
+    let a = body(&ctx, shapes::icosphere(1.0, 3));
+    let b = body(&ctx, shapes::torus(0.8, 0.25, 48, 16).expect("torus"));
+    let pose_b = Pose::new(DVec3::new(0.7, 0.1, 0.0), DQuat::from_rotation_x(0.7));
+    let got = ctx
+        .collide(
+            &a.gpu,
+            &Pose::IDENTITY,
+            &b.gpu,
+            &pose_b,
+            &mut QueryScratch::default(),
+        )
+        .unwrap();
+    assert_eq!(
+        got.pairs,
+        oracle::pairs(&a.mesh, &Pose::IDENTITY, &b.mesh, &pose_b)
+    );
+    assert_eq!(got.exact_offsets, want);
 }
 
 /// Pass timers: with them, a batch reports one GPU time per traversal level, the triangle pass
