@@ -882,6 +882,43 @@ mod tests {
         assert!(windows.iter().all(|&n| n > 0), "{windows:?}");
     }
 
+    #[test]
+    fn exact_w_limbs_stay_in_i32_at_the_extremes() {
+        // The largest words the CPU can give (|M| <= 2^46 with full low limbs, |T| < 2^78, A's
+        // shift 62, |k| = 2^13) in every sign combination: `exact_w`'s checked i32 operations
+        // must not overflow and must equal the i128 value.
+        let big_t = (1i128 << 78) - 1;
+        let kk = 1i64 << GRID_BITS;
+        let mut n = 0;
+        for m in [
+            (1i64 << 46) - 1,
+            -(1i64 << 46),
+            (1i64 << 46) - 0x8001,
+            0xffff_ffff,
+        ] {
+            for sm in [1, -1] {
+                for st in [1, -1, 0] {
+                    for sk in [1, -1] {
+                        for (ea, eb) in [(16, 0), (-46, 0), (0, 0)] {
+                            let ep = ExactPose {
+                                mode: 1,
+                                m: [[sm * m, -sm * m, sm * m]; 3],
+                                t: [st * big_t, -st * big_t, st * (big_t >> 20)],
+                                ea,
+                                eb,
+                            };
+                            let k = [sk * kk, -sk * kk, sk * kk];
+                            let w = exact_w(&ep, k, [-k[0], k[1], k[2]]);
+                            assert!(w.is_some(), "{ep:?}");
+                            n += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert_eq!(n, 144);
+    }
+
     /// Box pairs that share a point for certain, most of them only just: a corner of A (the
     /// f32 parallelepiped) pushed a hair (1e-9 of its extents) through a face of B, which is
     /// placed by an f64 pose so that the face's outward normal looks at A (so the overlap is
