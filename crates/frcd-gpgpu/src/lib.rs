@@ -29,7 +29,9 @@
 //!   each box scans forward while the next minimum is within its maximum. Equal to the f64
 //!   all-pairs answer ([`GpuContext::overlapping_bodies_all_pairs`] is the O(n²) form).
 //!
-//! Numbers: the GPU computes in f32 relative to each body's local origin; every f32 quantity that
+//! Numbers: the GPU computes in f32 relative to each body's local origin (triangles relative to
+//! grid reference points, whose offset the triangle pass can compute exactly in integers: see
+//! [`GpuContext::set_exact_offsets`]); every f32 quantity that
 //! could drop a candidate carries a computed error bound that holds under WGSL's float rules
 //! (rounding either way, fused multiply-adds, flush-to-zero; derivation in
 //! `shaders/traverse.wgsl`), and every pair the GPU reports is re-decided exactly on the CPU.
