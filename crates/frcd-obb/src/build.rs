@@ -38,9 +38,11 @@ impl Item {
 
 /// Builds the nodes (depth-first, node 0 the root) and the leaf order of `mesh`'s triangles.
 ///
-/// Each internal node costs one pass over its triangles, which projects its vertices on the
-/// fitted axes (the box), partitions the triangles about the split plane and sums each side's
-/// moments (the children's means and covariances, see [`Moments`]), and one eigen-solve; a
+/// Each internal node costs one pass over its triangles ([`SplitMethod::MajorAxisMean`]; two
+/// and a binning of compact copies with [`SplitMethod::SurfaceCost`], see
+/// [`box_and_cost_split`]), which projects its vertices on the fitted axes (the box),
+/// partitions the triangles about the split plane and sums each side's moments (the
+/// children's means and covariances, see [`Moments`]), and one eigen-solve; a
 /// leaf's axes come from the moments its parent summed. The partition is branchless and out of
 /// place: each triangle is copied to the front (left) or the back (right) of the same range of
 /// a second buffer, which the children read from (the two buffers alternate by depth), so a
@@ -435,8 +437,12 @@ impl Bin {
     fn merge(&mut self, bounds: &[f32; 8], count: u32) {
         // Plain compares (`minps`) rather than `f32::min`'s NaN handling: probes are never
         // NaN (finite f64 values converted), and a bound only feeds a cost.
-        for (b, &p) in self.bounds.iter_mut().zip(bounds) {
-            *b = if p < *b { p } else { *b };
+        // Indexed, not zipped: the zipped form compiled to scalar code and made the whole
+        // surface-cost build about 20 % slower (knot: 90 against 73 ms).
+        #[allow(clippy::needless_range_loop)]
+        for i in 0..8 {
+            let (b, p) = (self.bounds[i], bounds[i]);
+            self.bounds[i] = if p < b { p } else { b };
         }
         self.count += count;
     }

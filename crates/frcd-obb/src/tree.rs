@@ -53,10 +53,10 @@ pub struct BuildOptions {
     /// 156-165 at leaf 1 (target ≤ 150).
     pub max_leaf_triangles: u32,
     /// Rule choosing where each internal node splits its triangles. The default,
-    /// [`SplitMethod::SurfaceCost`], makes trees that cost 4-6× fewer box tests on real CAD
-    /// parts and 10-15 % fewer on smooth meshes than [`SplitMethod::MajorAxisMean`] (PQP's
-    /// rule), for a build that takes about 1.3-1.5× as long (`benches/benches/build.rs`,
-    /// `docs/performance/cpu-core.md`).
+    /// [`SplitMethod::SurfaceCost`], makes trees that need 4-6× fewer box tests per query on
+    /// real CAD parts (railway wagon and bogie frames) and 10-15 % fewer on smooth meshes than
+    /// [`SplitMethod::MajorAxisMean`] (PQP's rule), for a build that takes 1.4-2× as long
+    /// (`benches/benches/build.rs`; figures in `docs/performance/cpu-core.md`).
     #[cfg_attr(feature = "serde", serde(default))]
     pub split: SplitMethod,
 }
