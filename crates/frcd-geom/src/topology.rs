@@ -1,4 +1,5 @@
 use glam::DVec3;
+#[cfg(test)]
 use std::collections::HashMap;
 
 /// Topology of an indexed triangle mesh, on its vertex indices (weld first for STL).
@@ -52,7 +53,146 @@ impl Topology {
         self.is_closed() && self.is_manifold() && self.is_oriented()
     }
 
+    /// The report, in `O(n log n)` for `n` triangles whatever the input (sorts, no hashing: a
+    /// crafted mesh cannot make it quadratic), without an allocation per vertex.
     pub(crate) fn compute(vertices: &[DVec3], indices: &[[u32; 3]]) -> Self {
+        let mut t = Topology::default();
+        let proper = |tri: &[u32; 3]| tri[0] != tri[1] && tri[1] != tri[2] && tri[0] != tri[2];
+        // Every directed edge as one sortable word: the undirected edge (lower, higher index)
+        // above, the direction (a > b) in the lowest bit.
+        let mut directed: Vec<u64> = Vec::with_capacity(indices.len() * 3);
+        for tri in indices {
+            if !proper(tri) {
+                t.index_degenerate += 1;
+                continue;
+            }
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                let (lo, hi) = (a.min(b) as u64, a.max(b) as u64);
+                directed.push(lo << 33 | hi << 1 | (a > b) as u64);
+            }
+        }
+        directed.sort_unstable();
+        let mut bad_vertex = vec![false; vertices.len()];
+        for run in directed.chunk_by(|x, y| x >> 1 == y >> 1) {
+            t.edges += 1;
+            let (a, b) = (
+                (run[0] >> 33) as usize,
+                ((run[0] >> 1) & 0xFFFF_FFFF) as usize,
+            );
+            match run.len() {
+                1 => t.boundary_edges += 1,
+                2 => {}
+                _ => {
+                    t.non_manifold_edges += 1;
+                    bad_vertex[a] = true;
+                    bad_vertex[b] = true;
+                }
+            }
+            // Sorted, so the run holds its a < b copies first.
+            let backward = run.iter().filter(|&&x| x & 1 == 1).count();
+            let forward = run.len() - backward;
+            t.orientation_conflicts += forward.saturating_sub(1) + backward.saturating_sub(1);
+        }
+        // Fans: around each vertex, link triangles that share an edge through the vertex. The
+        // incident triangles of every vertex in one flat array (counts, then offsets).
+        let mut start = vec![0u32; vertices.len() + 1];
+        for tri in indices.iter().filter(|tri| proper(tri)) {
+            for &v in tri {
+                start[v as usize + 1] += 1;
+            }
+        }
+        for v in 0..vertices.len() {
+            start[v + 1] += start[v];
+        }
+        let mut fill = start.clone();
+        let mut incident = vec![0u32; start[vertices.len()] as usize];
+        for (i, tri) in indices.iter().enumerate() {
+            if !proper(tri) {
+                continue;
+            }
+            for &v in tri {
+                incident[fill[v as usize] as usize] = i as u32;
+                fill[v as usize] += 1;
+            }
+        }
+        // Reused by every vertex: (other vertex, position of the triangle in the fan).
+        let mut by_other: Vec<(u32, u32)> = Vec::new();
+        let mut parent: Vec<usize> = Vec::new();
+        for v in 0..vertices.len() {
+            let tris = &incident[start[v] as usize..start[v + 1] as usize];
+            if tris.len() < 2 || bad_vertex[v] {
+                continue;
+            }
+            // Union-find over the incident triangles, linked through their other vertices:
+            // entries sorted by other vertex, neighbours in a run share an edge through `v`.
+            fn find(p: &mut [usize], mut i: usize) -> usize {
+                while p[i] != i {
+                    p[i] = p[p[i]];
+                    i = p[i];
+                }
+                i
+            }
+            parent.clear();
+            parent.extend(0..tris.len());
+            by_other.clear();
+            for (k, &ti) in tris.iter().enumerate() {
+                for &o in &indices[ti as usize] {
+                    if o as usize != v {
+                        by_other.push((o, k as u32));
+                    }
+                }
+            }
+            by_other.sort_unstable();
+            for w in by_other.windows(2) {
+                if w[0].0 == w[1].0 {
+                    let (a, b) = (
+                        find(&mut parent, w[0].1 as usize),
+                        find(&mut parent, w[1].1 as usize),
+                    );
+                    parent[a] = b;
+                }
+            }
+            let roots = (0..tris.len())
+                .filter(|&k| find(&mut parent, k) == k)
+                .count();
+            if roots > 1 {
+                bad_vertex[v] = true;
+            }
+        }
+        t.non_manifold_vertices = bad_vertex.iter().filter(|b| **b).count();
+        // Components through shared vertices.
+        let mut parent: Vec<u32> = (0..vertices.len() as u32).collect();
+        fn root(p: &mut [u32], mut i: u32) -> u32 {
+            while p[i as usize] != i {
+                p[i as usize] = p[p[i as usize] as usize];
+                i = p[i as usize];
+            }
+            i
+        }
+        let mut used = vec![false; vertices.len()];
+        for tri in indices {
+            for &v in tri {
+                used[v as usize] = true;
+            }
+            let r0 = root(&mut parent, tri[0]);
+            for &v in &tri[1..] {
+                let r = root(&mut parent, v);
+                if r != r0 {
+                    parent[r as usize] = r0;
+                }
+            }
+        }
+        t.components = (0..vertices.len() as u32)
+            .filter(|&v| used[v as usize] && root(&mut parent, v) == v)
+            .count();
+        t
+    }
+
+    /// The straightforward version [`Topology::compute`] replaced (hash maps, a list per
+    /// vertex): the tests check both give the same report.
+    #[cfg(test)]
+    pub(crate) fn compute_reference(vertices: &[DVec3], indices: &[[u32; 3]]) -> Self {
         let mut t = Topology::default();
         // Undirected edge -> (count, directed count a<b, directed count a>b)
         let mut edges: HashMap<(u32, u32), [u32; 3]> =
@@ -154,5 +294,63 @@ impl Topology {
             .filter(|&v| used[v as usize] && root(&mut parent, v) == v)
             .count();
         t
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sort-based report equals the hash-map one on soups with every kind of defect
+    /// (repeated and flipped triangles, index-degenerate ones, fans pinched at a vertex, many
+    /// components), drawn from a small vertex set so that edges repeat often.
+    #[test]
+    fn sorted_report_equals_the_hash_map_report() {
+        let mut x = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = |m: u32| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x % m as u64) as u32
+        };
+        for case in 0..400 {
+            let nv = 4 + next(40);
+            let vertices: Vec<DVec3> = (0..nv).map(|i| DVec3::splat(i as f64)).collect();
+            let nt = next(120);
+            let mut indices: Vec<[u32; 3]> =
+                (0..nt).map(|_| [next(nv), next(nv), next(nv)]).collect();
+            if case % 3 == 0 {
+                // A closed, oriented shape's triangles too (a tetrahedron), maybe flipped.
+                let tet = [[0, 1, 2], [0, 3, 1], [1, 3, 2], [2, 3, 0]];
+                indices.extend(tet.iter().map(|t| {
+                    if case % 2 == 0 {
+                        *t
+                    } else {
+                        [t[0], t[2], t[1]]
+                    }
+                }));
+            }
+            assert_eq!(
+                Topology::compute(&vertices, &indices),
+                Topology::compute_reference(&vertices, &indices),
+                "case {case}: {indices:?}"
+            );
+        }
+        // A bowtie (two fans at vertex 0) and a closed tetrahedron, exactly.
+        let v: Vec<DVec3> = (0..5).map(|i| DVec3::splat(i as f64)).collect();
+        let bowtie = Topology::compute(&v, &[[0, 1, 2], [0, 3, 4]]);
+        assert_eq!(
+            (
+                bowtie.non_manifold_vertices,
+                bowtie.boundary_edges,
+                bowtie.edges
+            ),
+            (1, 6, 6)
+        );
+        let tet = Topology::compute(&v, &[[0, 1, 2], [0, 3, 1], [1, 3, 2], [2, 3, 0]]);
+        assert!(tet.is_closed_oriented_manifold() && tet.edges == 6 && tet.components == 1);
+        let flipped = Topology::compute(&v, &[[0, 1, 2], [0, 1, 3], [1, 3, 2], [2, 3, 0]]);
+        // One face flipped: each of its three edges runs the same way in both its triangles.
+        assert!(flipped.is_closed() && flipped.orientation_conflicts == 3);
     }
 }
