@@ -94,6 +94,20 @@ pub struct Opts {
     /// GPU, the CPU's re-decision) is always written.
     #[arg(long)]
     pub pass_timers: bool,
+    /// The triangle pass's exact reference-point offsets (`GpuContext::set_exact_offsets`):
+    /// `on` or `off`; left out, the context's default (on for hardware adapters, off for
+    /// software ones, or `FRCD_GPGPU_EXACT_OFFSETS`).
+    #[arg(long, value_name = "on|off", value_parser = parse_on_off)]
+    pub exact_offsets: Option<bool>,
+}
+
+/// `on` / `off` as a bool (clap value parser).
+fn parse_on_off(s: &str) -> std::result::Result<bool, String> {
+    match s {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        _ => Err(format!("want on or off, got {s:?}")),
+    }
 }
 
 /// Where the time of one row's batches went: medians over the timed batches.
@@ -350,6 +364,9 @@ pub fn run(mut o: Opts) -> Result<()> {
     .context("bench gpgpu needs a GPU adapter")?;
     if o.pass_timers && !ctx.has_pass_timers() {
         println!("pass timers asked for, but the adapter has no timestamps inside passes");
+    }
+    if let Some(on) = o.exact_offsets {
+        ctx.set_exact_offsets(on);
     }
     let mut breakdowns: Vec<Breakdown> = Vec::new();
     let info = ctx.adapter_info().clone();
@@ -657,8 +674,15 @@ pub fn run(mut o: Opts) -> Result<()> {
     writeln!(md, "# GPGPU pipeline vs CPU OBB traversal\n")?;
     writeln!(
         md,
-        "Adapter: **{}** ({:?}, {:?}, driver {} {}). CPU: {} rayon threads. `cargo xtask bench gpgpu`, median of {} runs.\n",
-        info.name, info.backend, info.device_type, info.driver, info.driver_info, threads, o.runs
+        "Adapter: **{}** ({:?}, {:?}, driver {} {}). CPU: {} rayon threads. `cargo xtask bench gpgpu`, median of {} runs. Triangle pass: exact reference-point offsets {}.\n",
+        info.name,
+        info.backend,
+        info.device_type,
+        info.driver,
+        info.driver_info,
+        threads,
+        o.runs,
+        if ctx.exact_offsets() { "on" } else { "off" }
     )?;
     if let (Some(a), Some(b)) = (&load_start, &load_end) {
         writeln!(
