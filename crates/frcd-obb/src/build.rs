@@ -467,7 +467,8 @@ impl Bin {
 /// chosen cut leaves exactly the counted triangles on each side).
 #[inline(always)]
 fn bin_of(sum: f32, min: f32, scale: f32, bins: usize) -> usize {
-    // Clamped as a float first (a NaN goes to bin 0): the conversion is then in range.
+    // Clamped as a float first (a NaN would land in the last bin; `cheapest_cut` bins only
+    // axes whose range is finite, so every coordinate is): the conversion is then in range.
     let x = (sum - min) * scale;
     let last = (bins - 1) as f32;
     let x = if x < last { x } else { last };
@@ -475,7 +476,8 @@ fn bin_of(sum: f32, min: f32, scale: f32, bins: usize) -> usize {
     (if x > 0.0 { x } else { 0.0 }) as i32 as usize
 }
 
-/// The cut of least [`Bin::cost`] over the node's probes, or `None` where no axis has two distinct centroid coordinates to cut between.
+/// The cut of least [`Bin::cost`] over the node's probes, or `None` where no axis has two
+/// distinct (finite) centroid coordinates to cut between.
 fn cheapest_cut(probes: &[Probe], min: [f32; 3], max: [f32; 3]) -> Option<Cut> {
     // Small nodes (most of a tree's nodes) get one bin per triangle: the same candidates a
     // sorted sweep would mostly see, for a fraction of the fixed cost of 16 bins.
