@@ -58,28 +58,24 @@ impl Topology {
     pub(crate) fn compute(vertices: &[DVec3], indices: &[[u32; 3]]) -> Self {
         let mut t = Topology::default();
         let proper = |tri: &[u32; 3]| tri[0] != tri[1] && tri[1] != tri[2] && tri[0] != tri[2];
-        // Every directed edge as one sortable word: the undirected edge (lower, higher index)
-        // above, the direction (a > b) in the lowest bit.
-        let mut directed: Vec<u64> = Vec::with_capacity(indices.len() * 3);
+        // Every directed edge as a sortable pair: the undirected edge (lower index, higher
+        // index: 32 bits each, so any u32 index) and its direction (a > b).
+        let mut directed: Vec<(u64, bool)> = Vec::with_capacity(indices.len() * 3);
         for tri in indices {
             if !proper(tri) {
                 t.index_degenerate += 1;
                 continue;
             }
             for k in 0..3 {
-                let (a, b) = (tri[k], tri[(k + 1) % 3]);
-                let (lo, hi) = (a.min(b) as u64, a.max(b) as u64);
-                directed.push(lo << 33 | hi << 1 | (a > b) as u64);
+                directed.push(edge_word(tri[k], tri[(k + 1) % 3]));
             }
         }
         directed.sort_unstable();
         let mut bad_vertex = vec![false; vertices.len()];
-        for run in directed.chunk_by(|x, y| x >> 1 == y >> 1) {
+        for run in directed.chunk_by(|x, y| x.0 == y.0) {
             t.edges += 1;
-            let (a, b) = (
-                (run[0] >> 33) as usize,
-                ((run[0] >> 1) & 0xFFFF_FFFF) as usize,
-            );
+            let (a, b) = edge_ends(run[0].0);
+            let (a, b) = (a as usize, b as usize);
             match run.len() {
                 1 => t.boundary_edges += 1,
                 2 => {}
@@ -89,14 +85,14 @@ impl Topology {
                     bad_vertex[b] = true;
                 }
             }
-            // Sorted, so the run holds its a < b copies first.
-            let backward = run.iter().filter(|&&x| x & 1 == 1).count();
+            let backward = run.iter().filter(|x| x.1).count();
             let forward = run.len() - backward;
             t.orientation_conflicts += forward.saturating_sub(1) + backward.saturating_sub(1);
         }
         // Fans: around each vertex, link triangles that share an edge through the vertex. The
         // incident triangles of every vertex in one flat array (counts, then offsets).
-        let mut start = vec![0u32; vertices.len() + 1];
+        // usize: three entries per triangle can pass u32 on the largest meshes.
+        let mut start = vec![0usize; vertices.len() + 1];
         for tri in indices.iter().filter(|tri| proper(tri)) {
             for &v in tri {
                 start[v as usize + 1] += 1;
@@ -106,13 +102,13 @@ impl Topology {
             start[v + 1] += start[v];
         }
         let mut fill = start.clone();
-        let mut incident = vec![0u32; start[vertices.len()] as usize];
+        let mut incident = vec![0u32; start[vertices.len()]];
         for (i, tri) in indices.iter().enumerate() {
             if !proper(tri) {
                 continue;
             }
             for &v in tri {
-                incident[fill[v as usize] as usize] = i as u32;
+                incident[fill[v as usize]] = i as u32;
                 fill[v as usize] += 1;
             }
         }
@@ -120,7 +116,7 @@ impl Topology {
         let mut by_other: Vec<(u32, u32)> = Vec::new();
         let mut parent: Vec<usize> = Vec::new();
         for v in 0..vertices.len() {
-            let tris = &incident[start[v] as usize..start[v + 1] as usize];
+            let tris = &incident[start[v]..start[v + 1]];
             if tris.len() < 2 || bad_vertex[v] {
                 continue;
             }
@@ -161,31 +157,7 @@ impl Topology {
             }
         }
         t.non_manifold_vertices = bad_vertex.iter().filter(|b| **b).count();
-        // Components through shared vertices.
-        let mut parent: Vec<u32> = (0..vertices.len() as u32).collect();
-        fn root(p: &mut [u32], mut i: u32) -> u32 {
-            while p[i as usize] != i {
-                p[i as usize] = p[p[i as usize] as usize];
-                i = p[i as usize];
-            }
-            i
-        }
-        let mut used = vec![false; vertices.len()];
-        for tri in indices {
-            for &v in tri {
-                used[v as usize] = true;
-            }
-            let r0 = root(&mut parent, tri[0]);
-            for &v in &tri[1..] {
-                let r = root(&mut parent, v);
-                if r != r0 {
-                    parent[r as usize] = r0;
-                }
-            }
-        }
-        t.components = (0..vertices.len() as u32)
-            .filter(|&v| used[v as usize] && root(&mut parent, v) == v)
-            .count();
+        t.components = components(vertices.len(), indices);
         t
     }
 
@@ -268,38 +240,79 @@ impl Topology {
             }
         }
         t.non_manifold_vertices = bad_vertex.iter().filter(|b| **b).count();
-        // Components through shared vertices.
-        let mut parent: Vec<u32> = (0..vertices.len() as u32).collect();
-        fn root(p: &mut [u32], mut i: u32) -> u32 {
-            while p[i as usize] != i {
-                p[i as usize] = p[p[i as usize] as usize];
-                i = p[i as usize];
-            }
-            i
-        }
-        let mut used = vec![false; vertices.len()];
-        for tri in indices {
-            for &v in tri {
-                used[v as usize] = true;
-            }
-            let r0 = root(&mut parent, tri[0]);
-            for &v in &tri[1..] {
-                let r = root(&mut parent, v);
-                if r != r0 {
-                    parent[r as usize] = r0;
-                }
-            }
-        }
-        t.components = (0..vertices.len() as u32)
-            .filter(|&v| used[v as usize] && root(&mut parent, v) == v)
-            .count();
+        t.components = components(vertices.len(), indices);
         t
     }
+}
+
+/// The directed edge `a → b` as its undirected edge's sort key (lower index in the high 32
+/// bits, higher in the low 32: distinct for any two u32 index pairs) and its direction.
+fn edge_word(a: u32, b: u32) -> (u64, bool) {
+    ((a.min(b) as u64) << 32 | a.max(b) as u64, a > b)
+}
+
+/// The (lower, higher) vertex indices of an [`edge_word`] key.
+fn edge_ends(key: u64) -> (u32, u32) {
+    ((key >> 32) as u32, key as u32)
+}
+
+/// Connected components of the used vertices, linked through shared triangles (union-find).
+fn components(vertex_count: usize, indices: &[[u32; 3]]) -> usize {
+    let mut parent: Vec<u32> = (0..vertex_count as u32).collect();
+    fn root(p: &mut [u32], mut i: u32) -> u32 {
+        while p[i as usize] != i {
+            p[i as usize] = p[p[i as usize] as usize];
+            i = p[i as usize];
+        }
+        i
+    }
+    let mut used = vec![false; vertex_count];
+    for tri in indices {
+        for &v in tri {
+            used[v as usize] = true;
+        }
+        let r0 = root(&mut parent, tri[0]);
+        for &v in &tri[1..] {
+            let r = root(&mut parent, v);
+            if r != r0 {
+                parent[r as usize] = r0;
+            }
+        }
+    }
+    (0..vertex_count as u32)
+        .filter(|&v| used[v as usize] && root(&mut parent, v) == v)
+        .count()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Edge keys are exact over the whole u32 range (a first version packed the direction
+    /// into the key and lost the top bit of indices from 2^31 on).
+    #[test]
+    fn edge_words_are_distinct_and_decode_over_the_whole_index_range() {
+        let big = [
+            0,
+            1,
+            (1 << 31) - 1,
+            1 << 31,
+            (1 << 31) + 1,
+            u32::MAX - 1,
+            u32::MAX,
+        ];
+        let mut keys = std::collections::HashSet::new();
+        for &a in &big {
+            for &b in &big {
+                let (key, backward) = edge_word(a, b);
+                assert_eq!(edge_ends(key), (a.min(b), a.max(b)));
+                assert_eq!(backward, a > b);
+                assert_eq!(edge_word(b, a).0, key, "one key per undirected edge");
+                keys.insert(key);
+            }
+        }
+        assert_eq!(keys.len(), big.len() * (big.len() + 1) / 2);
+    }
 
     /// The sort-based report equals the hash-map one on soups with every kind of defect
     /// (repeated and flipped triangles, index-degenerate ones, fans pinched at a vertex, many

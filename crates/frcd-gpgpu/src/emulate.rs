@@ -617,6 +617,19 @@ pub(crate) fn tri_tri_rotated(p: &PoseF, ea: i32, eb: i32, a: &TriOff, b: &TriOf
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A xorshift stream of uniform values in [-1, 1), the same sequence for the same seed.
+    fn signed_uniform(seed: u64) -> impl Fn() -> f64 {
+        let state = Cell::new(seed);
+        move || {
+            let mut x = state.get();
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            state.set(x);
+            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        }
+    }
     use crate::pack::{
         ExactPose, GRID_BITS, grid_coords, grid_exponent_for, grid_point, obb_to_f32,
         pack_tree_rows, unpack_k,
@@ -674,15 +687,7 @@ mod tests {
     /// coplanar, at scales from 1e-30 (products underflow f32: flush-to-zero territory) to
     /// 1e4 and offsets up to 1e7.
     fn touching_cases() -> Vec<(Triangle, Triangle, RelativeFrame)> {
-        let seed = Cell::new(12345u64);
-        let rnd = || {
-            let mut x = seed.get();
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            seed.set(x);
-            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        let rnd = signed_uniform(12345u64);
         let mut out = Vec::new();
         let scales = [1e-30, 1e-12, 1e-3, 1.0, 1e4];
         let offsets = [0.0, 1.0, 1e3, 1e7];
@@ -832,15 +837,7 @@ mod tests {
         // modes and the whole range (|W / f| up to 2^79, both windows of the conversion):
         // the limbs equal the i128 value (asserted inside `exact_w`) and the f32 W is within
         // 1.02 U |W| of it under every rounding mode.
-        let seed = Cell::new(424242u64);
-        let rnd = || {
-            let mut x = seed.get();
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            seed.set(x);
-            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        let rnd = signed_uniform(424242u64);
         let lim = (1i64 << GRID_BITS) as f64;
         let mut windows = [0usize; 2];
         let mut cases = Vec::new();
@@ -926,15 +923,7 @@ mod tests {
     fn touching_boxes() -> Vec<(NodeF, NodeF, PoseF)> {
         use crate::pack::ObbF32;
         use frcd_geom::DMat3;
-        let seed = Cell::new(987654321u64);
-        let rnd = || {
-            let mut x = seed.get();
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            seed.set(x);
-            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        let rnd = signed_uniform(987654321u64);
         let rv = || DVec3::new(rnd(), rnd(), rnd());
         let rot = || {
             DMat3::from_quat(DQuat::from_axis_angle(

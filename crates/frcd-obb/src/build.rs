@@ -392,14 +392,7 @@ fn box_and_split(
         r -= right as usize;
     }
     let obb = Obb::from_projection_bounds(axes, lo, hi, mag);
-    if l > 0 && l < len {
-        return (obb, l, sums);
-    }
-    let mid = split_fallback(&axes, mean, dst);
-    let sums = [
-        Moments::of(&dst[..mid], mean),
-        Moments::of(&dst[mid..], mean),
-    ];
+    let (mid, sums) = kept_or_fallback(&axes, mean, dst, l, sums);
     (obb, mid, sums)
 }
 
@@ -590,15 +583,29 @@ fn box_and_cost_split(
         l += (!right) as usize;
         r -= right as usize;
     }
-    if l > 0 && l < len {
-        return (obb, l, sums);
+    let (mid, sums) = kept_or_fallback(&axes, mean, dst, l, sums);
+    (obb, mid, sums)
+}
+
+/// The end of both partitions: the left part's size `left` and the sides' moments as the pass
+/// left them when both sides are non-empty, else [`split_fallback`]'s partition of `dst` and
+/// its sides' moments summed afresh.
+fn kept_or_fallback(
+    axes: &DMat3,
+    mean: DVec3,
+    dst: &mut [Item],
+    left: usize,
+    sums: [Moments; 2],
+) -> (usize, [Moments; 2]) {
+    if left > 0 && left < dst.len() {
+        return (left, sums);
     }
-    let mid = split_fallback(&axes, mean, dst);
+    let mid = split_fallback(axes, mean, dst);
     let sums = [
         Moments::of(&dst[..mid], mean),
         Moments::of(&dst[mid..], mean),
     ];
-    (obb, mid, sums)
+    (mid, sums)
 }
 
 /// The box of one triangle in its own frame (longest edge, in-plane normal to it, normal):
