@@ -6,6 +6,7 @@
 //! cargo bench -p frcd-benches --bench build -- --warm-up-time 1 --measurement-time 2
 //! FRCD_BUILD_QUALITY=0 cargo bench -p frcd-benches --bench build   # ratio lines only
 //! FRCD_BUILD_ONLY=fandisk,knot cargo bench -p frcd-benches --bench build   # these meshes only
+//! FRCD_BUILD_SPLIT=mean cargo bench -p frcd-benches --bench build   # ratios of SplitMethod::MajorAxisMean
 //! ```
 //!
 //! - `build/ratio` lines: per mesh, the two builds interleaved build by build for about three
@@ -24,7 +25,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use frcd_benches::scenes::{self, Scene};
 use frcd_benches::thread_cpu;
 use frcd_geom::TriMesh;
-use frcd_obb::{BuildOptions, Mode, ObbTree, Request, collide};
+use frcd_obb::{BuildOptions, Mode, ObbTree, Request, SplitMethod, collide};
 use std::hint::black_box;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -94,9 +95,22 @@ fn timed<T>(f: impl FnOnce() -> T) -> (f64, Option<f64>) {
     (wall, thread_cpu().zip(c).map(|(b, a)| b - a))
 }
 
+/// The split rule the ratio lines build with: `FRCD_BUILD_SPLIT=mean` for
+/// `SplitMethod::MajorAxisMean`, else the default.
+fn split_rule() -> (SplitMethod, &'static str) {
+    match std::env::var("FRCD_BUILD_SPLIT").as_deref() {
+        Ok("mean") => (SplitMethod::MajorAxisMean, "mean"),
+        _ => (SplitMethod::SurfaceCost, "surface"),
+    }
+}
+
 /// Interleaved medians of the two builds, in wall and in thread-CPU time.
 fn ratio(name: &str, mesh: &TriMesh) {
-    let opts = BuildOptions::default();
+    let (split, rule) = split_rule();
+    let opts = BuildOptions {
+        split,
+        ..BuildOptions::default()
+    };
     let (mut f, mut p, mut fc, mut pc) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let end = Instant::now() + Duration::from_secs(3);
     while Instant::now() < end || f.len() < 15 {
@@ -121,7 +135,7 @@ fn ratio(name: &str, mesh: &TriMesh) {
         String::new()
     };
     println!(
-        "build/ratio {name}: wall: frcd {:.2} ms, parry3d-f64 {:.2} ms: {:.2}x{cpu} (medians of {n} interleaved builds, load average {})",
+        "build/ratio {name} (split {rule}): wall: frcd {:.2} ms, parry3d-f64 {:.2} ms: {:.2}x{cpu} (medians of {n} interleaved builds, load average {})",
         mf * 1e3,
         mp * 1e3,
         mf / mp,

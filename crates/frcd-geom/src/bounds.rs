@@ -163,19 +163,25 @@ impl Sphere {
             return Self::new(DVec3::ZERO, 0.0);
         };
         let far = |from: DVec3| {
-            points.iter().copied().fold(from, |best, p| {
-                if p.distance_squared(from) > best.distance_squared(from) {
-                    p
-                } else {
-                    best
+            let (mut best, mut best_d2) = (from, 0.0);
+            for &p in points {
+                let d2 = p.distance_squared(from);
+                if d2 > best_d2 {
+                    (best, best_d2) = (p, d2);
                 }
-            })
+            }
+            best
         };
         let a = far(p0);
         let b = far(a);
         let mut center = 0.5 * (a + b);
         let mut radius = 0.5 * a.distance(b);
         for &p in points {
+            // The square root only for the few points that grow the sphere (a point the
+            // squared test rounds inside lies within an ulp of it: the final slack holds it).
+            if p.distance_squared(center) <= radius * radius {
+                continue;
+            }
             let d = p.distance(center);
             if d > radius {
                 let new_r = 0.5 * (radius + d);
