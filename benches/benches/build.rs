@@ -15,11 +15,16 @@
 //!   meshes of `../shared/meshes` (the intermodal wagon underframe, 18,824 triangles; the bogie
 //!   frame, 5,268; the fandisk, 5,750; SKIP when the folder is absent).
 //! - `build/quality` lines (unless `FRCD_BUILD_QUALITY=0`): box and triangle tests per query of
-//!   the trees on the `dense` (two icospheres sliding through each other, 200 steps) and
-//!   `knots_near` (two torus knots in near contact, 500 steps) classes of the `obb` bench, in
-//!   both modes, and the trees' total box surface: time-free numbers, identical run to run, so
-//!   a build change that loosens the trees shows up here exactly.
+//!   the trees on the `dense` (two icospheres sliding through each other, 200 steps),
+//!   `knots_near` (two torus knots in near contact, 500 steps) and CAD (the three pairs of
+//!   `../shared/meshes` at random poses near first contact, 100 steps each; SKIP when absent)
+//!   classes of the `obb` bench, in both modes, and the trees' total box surface: time-free
+//!   numbers, identical run to run, so a build change that loosens the trees shows up here
+//!   exactly.
 //! - criterion rows `build/frcd_*` and `build/parry3d_f64_*`: each build alone.
+
+#[path = "common/cad.rs"]
+mod cad;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use frcd_benches::scenes::{self, Scene};
@@ -199,6 +204,11 @@ fn bench_build(c: &mut Criterion) {
         dense.name = format!("dense_{}", dense.name);
         quality(&dense);
         quality(&scenes::knots_near_contact(500));
+        // The railway CAD pairs react most to a build change (a sampled binning cost them
+        // 20-35 % more box tests where the knots lost 5 %).
+        for scene in cad::cad_scenes() {
+            quality(&scene);
+        }
         for (name, mesh) in &meshes {
             let t = ObbTree::build_shared(Arc::new(mesh.clone()), &BuildOptions::default());
             println!(
