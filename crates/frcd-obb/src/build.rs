@@ -655,7 +655,8 @@ struct Cut {
 /// [`SplitMethod::SurfaceCost`]'s version of [`box_and_split`]: the same box, with the cut
 /// chosen by [`cheapest_cut`]. Two passes: the first projects the vertices (the box) and keeps
 /// each triangle's [`Probe`], the bins are then filled from the probes, and the second pass
-/// partitions. Where no cut is usable, the cut of
+/// partitions. A node of at most [`EXHAUSTIVE_MAX`] triangles takes [`cheapest_partition`]
+/// instead of binning. Where no cut is usable, the cut of
 /// [`box_and_split`] (through `mean` across the major axis) is taken.
 fn box_and_cost_split(
     axes: DMat3,
@@ -693,6 +694,18 @@ fn box_and_cost_split(
         };
     }
     let obb = Obb::from_projection_bounds(axes, lo, hi, mag);
+    if len <= EXHAUSTIVE_MAX {
+        let right = cheapest_partition(probes);
+        let (mut l, mut r) = (0usize, len);
+        for (i, item) in src.iter().enumerate() {
+            let right = right >> i & 1 != 0;
+            let k = if right { r - 1 } else { l };
+            dst[k] = *item;
+            l += (!right) as usize;
+            r -= right as usize;
+        }
+        return (obb, kept_or_fallback(&axes, mean, dst, l));
+    }
     let cut = cheapest_cut(probes, smin, smax, bins);
     let (mut l, mut r) = (0usize, len);
     for (item, probe) in src.iter().zip(probes.iter()) {
@@ -706,6 +719,41 @@ fn box_and_cost_split(
         r -= right as usize;
     }
     (obb, kept_or_fallback(&axes, mean, dst, l))
+}
+
+/// The largest node [`cheapest_partition`] splits (a quarter of a tree's internal nodes have
+/// 3 triangles and another quarter 4).
+const EXHAUSTIVE_MAX: usize = 4;
+
+/// For a node of at most [`EXHAUSTIVE_MAX`] triangles (at least two): the partition of least
+/// surface cost (as [`Sides::costs`]) among all of them into two non-empty sides (3 for three
+/// triangles, 7 for four), as the bit mask of the triangles going right; `0` where no cost is
+/// finite (the caller's fallback then splits).
+fn cheapest_partition(probes: &[Probe]) -> u32 {
+    let n = probes.len();
+    debug_assert!((2..=EXHAUSTIVE_MAX).contains(&n));
+    let full = (1u32 << n) - 1;
+    let side = |mask: u32| {
+        let mut acc = Bin::EMPTY;
+        for (i, p) in probes.iter().enumerate() {
+            if mask >> i & 1 != 0 {
+                acc.merge(&p.bounds, 1);
+            }
+        }
+        let e = [0, 1, 2].map(|k| -(acc.bounds[k + 4] + acc.bounds[k]));
+        let mean = (e[0] + e[1] + e[2]) * (1.0 / 3.0);
+        (e[0] * e[1] + e[1] * e[2] + e[2] * e[0] + mean * mean) * acc.count as f32
+    };
+    let mut best = (f32::INFINITY, 0u32);
+    // Each partition once: the masks that send the last triangle right, all but `full`.
+    for mask in (1 << (n - 1))..full {
+        let cost = side(mask) + side(full & !mask);
+        // Strictly less: NaN and infinite costs never win.
+        if cost < best.0 {
+            best = (cost, mask);
+        }
+    }
+    best.1
 }
 
 /// The end of both partitions: the left part's size `left` when both sides are non-empty,
@@ -1296,5 +1344,80 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Nodes of up to `EXHAUSTIVE_MAX` triangles take the cheapest of all their partitions:
+    /// never costlier than any other partition, the binned cut's included, and none at all
+    /// (the caller's fallback) when no cost is finite.
+    #[test]
+    fn small_nodes_take_the_cheapest_of_all_partitions() {
+        let mut rng = Rng(0x5a11);
+        let mut bins = [[Bin::EMPTY; BINS]; 3];
+        let cost = |probes: &[Probe], mask: u32| {
+            let mut acc = Bin::EMPTY;
+            for (i, p) in probes.iter().enumerate() {
+                if mask >> i & 1 != 0 {
+                    acc.merge(&p.bounds, 1);
+                }
+            }
+            let e = [0, 1, 2].map(|k| (-(acc.bounds[k + 4] + acc.bounds[k])) as f64);
+            let mean = (e[0] + e[1] + e[2]) / 3.0;
+            (e[0] * e[1] + e[1] * e[2] + e[2] * e[0] + mean * mean) * acc.count as f64
+        };
+        for n in 2..=EXHAUSTIVE_MAX {
+            let full = (1u32 << n) - 1;
+            let both = |probes: &[Probe], m: u32| cost(probes, m) + cost(probes, full & !m);
+            for _ in 0..300 {
+                let probes: Vec<Probe> = (0..n)
+                    .map(|_| {
+                        let (a, b) = (rng.point() * 4.0 - 2.0, rng.point() * 0.5);
+                        let (lo, hi) = (a.as_vec3(), (a + b).as_vec3());
+                        let sum = (3.0 * (a + 0.5 * b)).as_vec3();
+                        Probe {
+                            bounds: [lo.x, lo.y, lo.z, 0.0, -hi.x, -hi.y, -hi.z, 0.0],
+                            sum: [sum.x, sum.y, sum.z, 0.0],
+                        }
+                    })
+                    .collect();
+                let mask = cheapest_partition(&probes);
+                assert!(mask != 0 && mask != full, "n {n}: mask {mask:b}");
+                let best = both(&probes, mask);
+                for other in 1..full {
+                    assert!(
+                        best <= both(&probes, other) * (1.0 + 1e-5),
+                        "n {n}: {mask:b} against {other:b}"
+                    );
+                }
+                let smin = [0, 1, 2].map(|k| {
+                    probes
+                        .iter()
+                        .map(|p| p.sum[k])
+                        .fold(f32::INFINITY, f32::min)
+                });
+                let smax = [0, 1, 2].map(|k| {
+                    probes
+                        .iter()
+                        .map(|p| p.sum[k])
+                        .fold(f32::NEG_INFINITY, f32::max)
+                });
+                if let Some(c) = cheapest_cut(&probes, smin, smax, &mut bins) {
+                    let binned = probes.iter().enumerate().fold(0u32, |m, (i, p)| {
+                        let right = bin_of(p.sum[c.axis], c.min, c.scale, c.bins) > c.last_left;
+                        m | (right as u32) << i
+                    });
+                    if binned != 0 && binned != full {
+                        assert!(best <= both(&probes, binned) * (1.0 + 1e-5));
+                    }
+                }
+            }
+        }
+        let bad = vec![
+            Probe {
+                bounds: [f32::NAN; 8],
+                sum: [0.0; 4],
+            };
+            3
+        ];
+        assert_eq!(cheapest_partition(&bad), 0);
     }
 }

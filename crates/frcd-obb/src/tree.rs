@@ -58,7 +58,7 @@ pub struct BuildOptions {
     /// Rule choosing where each internal node splits its triangles. The default,
     /// [`SplitMethod::SurfaceCost`], makes trees that need 4-6× fewer box tests per query on
     /// real CAD parts (railway wagon and bogie frames) and 10-15 % fewer on smooth meshes than
-    /// [`SplitMethod::MajorAxisMean`] (PQP's rule), for a build that takes 1.4-2× as long
+    /// [`SplitMethod::MajorAxisMean`] (PQP's rule), for a build that takes about 1.5× as long
     /// (`benches/benches/build.rs`; figures in `docs/performance/cpu-core.md`).
     #[cfg_attr(feature = "serde", serde(default))]
     pub split: SplitMethod,
@@ -96,7 +96,8 @@ pub enum SplitMethod {
     /// axes (16 bins of the triangles' centroids per axis), the cost of a side being its
     /// triangle count times `xy + yz + zx + ((x + y + z) / 3)²` for the extents `x, y, z` of
     /// its triangles in the node's frame: the box's surface, which predicts how often a side is
-    /// visited, plus a term for the other tree's boxes it is tested against. Falls back to
+    /// visited, plus a term for the other tree's boxes it is tested against. A node of 3 or 4
+    /// triangles takes the cheapest of all its partitions instead. Falls back to
     /// [`SplitMethod::MajorAxisMean`]'s cut where no candidate leaves both sides non-empty.
     /// One more pass per node than `MajorAxisMean`.
     #[default]
