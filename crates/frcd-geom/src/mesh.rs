@@ -427,6 +427,21 @@ impl TriMesh {
             .get_or_init(|| Topology::compute(&self.vertices, &self.indices))
     }
 
+    /// The lowest-index vertex of each connected component (triangles linked through shared
+    /// vertices), in index order: one vertex per component, unused vertices in none.
+    ///
+    /// ```
+    /// use frcd_geom::{DVec3, shapes::icosphere};
+    /// let a = icosphere(1.0, 1);
+    /// let b = a.transformed(&frcd_geom::Pose::from_translation(DVec3::X * 5.0));
+    /// let both = frcd_geom::shapes::merge(&[a.clone(), b]).unwrap();
+    /// assert_eq!(both.component_vertices().len(), 2);
+    /// assert_eq!(both.component_vertices()[0], 0);
+    /// ```
+    pub fn component_vertices(&self) -> Vec<u32> {
+        crate::topology::component_vertices(self.vertices.len(), &self.indices)
+    }
+
     /// Signed volume by the divergence theorem (positive for a closed mesh with outward normals).
     pub fn signed_volume(&self) -> f64 {
         // Relative to the box centre to limit cancellation for large offsets.

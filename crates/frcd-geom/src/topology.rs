@@ -157,7 +157,7 @@ impl Topology {
             }
         }
         t.non_manifold_vertices = bad_vertex.iter().filter(|b| **b).count();
-        t.components = components(vertices.len(), indices);
+        t.components = component_vertices(vertices.len(), indices).len();
         t
     }
 
@@ -240,7 +240,7 @@ impl Topology {
             }
         }
         t.non_manifold_vertices = bad_vertex.iter().filter(|b| **b).count();
-        t.components = components(vertices.len(), indices);
+        t.components = component_vertices(vertices.len(), indices).len();
         t
     }
 }
@@ -256,8 +256,9 @@ fn edge_ends(key: u64) -> (u32, u32) {
     ((key >> 32) as u32, key as u32)
 }
 
-/// Connected components of the used vertices, linked through shared triangles (union-find).
-fn components(vertex_count: usize, indices: &[[u32; 3]]) -> usize {
+/// The lowest-index vertex of each connected component of the used vertices (linked through
+/// shared triangles, union-find), in index order: one entry per component.
+pub(crate) fn component_vertices(vertex_count: usize, indices: &[[u32; 3]]) -> Vec<u32> {
     let mut parent: Vec<u32> = (0..vertex_count as u32).collect();
     fn root(p: &mut [u32], mut i: u32) -> u32 {
         while p[i as usize] != i {
@@ -279,9 +280,16 @@ fn components(vertex_count: usize, indices: &[[u32; 3]]) -> usize {
             }
         }
     }
-    (0..vertex_count as u32)
-        .filter(|&v| used[v as usize] && root(&mut parent, v) == v)
-        .count()
+    let mut seen = vec![false; vertex_count];
+    let mut out = Vec::new();
+    for v in (0..vertex_count as u32).filter(|&v| used[v as usize]) {
+        let r = root(&mut parent, v) as usize;
+        if !seen[r] {
+            seen[r] = true;
+            out.push(v);
+        }
+    }
+    out
 }
 
 #[cfg(test)]

@@ -549,12 +549,18 @@ impl Sides {
         let [x, y, z] = &self.extent;
         let mut out = [0.0f32; BINS];
         for b in 0..BINS {
-            let mean = (x[b] + y[b] + z[b]) * (1.0 / 3.0);
-            let surface = x[b] * y[b] + y[b] * z[b] + z[b] * x[b] + mean * mean;
-            out[b] = surface * self.count[b] as f32;
+            out[b] = side_cost(x[b], y[b], z[b], self.count[b]);
         }
         out
     }
+}
+
+/// A side's cost for [`SplitMethod::SurfaceCost`]: its triangle `count` times the surface
+/// measure `xy + yz + zx + ((x + y + z) / 3)²` of its extents.
+#[inline(always)]
+fn side_cost(x: f32, y: f32, z: f32, count: u32) -> f32 {
+    let mean = (x + y + z) * (1.0 / 3.0);
+    (x * y + y * z + z * x + mean * mean) * count as f32
 }
 
 /// The bin of a centroid coordinate `sum` on an axis binned from `min` with `scale` bins per
@@ -694,31 +700,33 @@ fn box_and_cost_split(
         };
     }
     let obb = Obb::from_projection_bounds(axes, lo, hi, mag);
-    if len <= EXHAUSTIVE_MAX {
-        let right = cheapest_partition(probes);
-        let (mut l, mut r) = (0usize, len);
-        for (i, item) in src.iter().enumerate() {
-            let right = right >> i & 1 != 0;
-            let k = if right { r - 1 } else { l };
-            dst[k] = *item;
-            l += (!right) as usize;
-            r -= right as usize;
+    let left = if len <= EXHAUSTIVE_MAX {
+        let mask = cheapest_partition(probes);
+        partition(src, dst, |i| mask >> i & 1 != 0)
+    } else {
+        match cheapest_cut(probes, smin, smax, bins) {
+            Some(c) => partition(src, dst, |i| {
+                bin_of(probes[i].sum[c.axis], c.min, c.scale, c.bins) > c.last_left
+            }),
+            None => partition(src, dst, |i| probes[i].sum[0] >= 0.0),
         }
-        return (obb, kept_or_fallback(&axes, mean, dst, l));
-    }
-    let cut = cheapest_cut(probes, smin, smax, bins);
-    let (mut l, mut r) = (0usize, len);
-    for (item, probe) in src.iter().zip(probes.iter()) {
-        let right = match cut {
-            Some(c) => bin_of(probe.sum[c.axis], c.min, c.scale, c.bins) > c.last_left,
-            None => probe.sum[0] >= 0.0,
-        };
+    };
+    (obb, kept_or_fallback(&axes, mean, dst, left))
+}
+
+/// Copies `src` into `dst`, the triangles for which `right(i)` is false to the front in order
+/// and the others to the back (branchless); returns how many went to the front.
+#[inline(always)]
+fn partition(src: &[Item], dst: &mut [Item], right: impl Fn(usize) -> bool) -> usize {
+    let (mut l, mut r) = (0usize, src.len());
+    for (i, item) in src.iter().enumerate() {
+        let right = right(i);
         let k = if right { r - 1 } else { l };
         dst[k] = *item;
         l += (!right) as usize;
         r -= right as usize;
     }
-    (obb, kept_or_fallback(&axes, mean, dst, l))
+    l
 }
 
 /// The largest node [`cheapest_partition`] splits (a quarter of a tree's internal nodes have
@@ -741,8 +749,7 @@ fn cheapest_partition(probes: &[Probe]) -> u32 {
             }
         }
         let e = [0, 1, 2].map(|k| -(acc.bounds[k + 4] + acc.bounds[k]));
-        let mean = (e[0] + e[1] + e[2]) * (1.0 / 3.0);
-        (e[0] * e[1] + e[1] * e[2] + e[2] * e[0] + mean * mean) * acc.count as f32
+        side_cost(e[0], e[1], e[2], acc.count)
     };
     let mut best = (f32::INFINITY, 0u32);
     // Each partition once: the masks that send the last triangle right, all but `full`.

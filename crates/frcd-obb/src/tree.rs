@@ -422,42 +422,13 @@ fn norm_bound(p: DVec3) -> f64 {
     }
 }
 
+/// One vertex of each connected component of `mesh` (its lowest-index one).
 fn component_points(mesh: &TriMesh) -> Vec<DVec3> {
-    let n = mesh.vertex_count();
-    let mut parent: Vec<u32> = (0..n as u32).collect();
-    fn find(p: &mut [u32], mut i: u32) -> u32 {
-        while p[i as usize] != i {
-            p[i as usize] = p[p[i as usize] as usize];
-            i = p[i as usize];
-        }
-        i
-    }
-    let mut used = vec![false; n];
-    for tri in mesh.indices() {
-        for &v in tri {
-            used[v as usize] = true;
-        }
-        let r0 = find(&mut parent, tri[0]);
-        for &v in &tri[1..] {
-            let r = find(&mut parent, v);
-            if r != r0 {
-                parent[r as usize] = r0;
-            }
-        }
-    }
-    let mut seen = vec![false; n];
-    let mut out = Vec::new();
-    for v in 0..n as u32 {
-        if !used[v as usize] {
-            continue;
-        }
-        let r = find(&mut parent, v);
-        if !seen[r as usize] {
-            seen[r as usize] = true;
-            out.push(mesh.vertices()[v as usize]);
-        }
-    }
-    out
+    let vertices = mesh.vertices();
+    mesh.component_vertices()
+        .iter()
+        .map(|&v| vertices[v as usize])
+        .collect()
 }
 
 #[cfg(test)]
