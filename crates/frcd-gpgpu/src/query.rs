@@ -1,5 +1,5 @@
 use crate::{GpuContext, GpuError, GpuMesh};
-use frcd_geom::{Pose, TriMesh};
+use frcd_geom::{DVec3, Pose, TriMesh, Triangle};
 use frcd_gpu::layout::{PairInfo, Params, State};
 use frcd_obb::RelativeFrame;
 use frcd_tritri::Method;
@@ -359,17 +359,6 @@ struct Prepared {
     exact: bool,
 }
 
-/// One reported triangle pair after the CPU's exact test.
-struct Decided {
-    k: u32,
-    ia: u32,
-    ib: u32,
-    /// The GPU flagged it uncertain (else the GPU said touching).
-    uncertain: bool,
-    /// The exact test's answer.
-    touch: bool,
-}
-
 /// Reported pairs below which the re-decision stays on the calling thread. Measured on an H200's
 /// 16-core host: at 2,755 pairs the pool's hand-off and the other cores' cold caches made the
 /// re-decision slower than one thread (0.40-0.50 against 0.42 ms), at 5,882 faster (0.55
@@ -377,72 +366,149 @@ struct Decided {
 #[cfg(feature = "parallel")]
 const PARALLEL_DECISIONS: usize = 4096;
 
-/// Decides every reported entry `(pair, tri_a, tri_b | uncertain flag, _)` with the exact test;
-/// with the `parallel` feature, large batches on rayon's pool (the answer's order is kept).
-fn decide_all(
+/// Reported pairs whose triangles are fetched together before they are tested.
+const GATHER: usize = 32;
+
+/// Turns the GPU's reported entries `(pair, tri_a, tri_b | uncertain flag, _)` into one answer
+/// per body pair: checks every index, decides with the exact test the pairs `recheck` asks for,
+/// and sorts each answer's pairs (a pair reported twice is an internal error).
+///
+/// Why this shape: each pair `(a, b)` travels as one `u64` key `a << 32 | b << 1 | bit`, the bit
+/// first the GPU's uncertain flag, then "dropped" (the exact test found the pair disjoint),
+/// scattered by body pair after one counting pass, so a batch costs two passes over the entries
+/// plus one integer sort per answer; a pair reported twice sorts next to itself, dropped or not. The tuple-by-tuple version it replaces
+/// (a decision record per entry, collected through rayon, then a sort of `(u32, u32)`s) cost
+/// 80 ns per reported pair even when no exact test ran.
+fn decide_entries(
     p: &Prepared,
     entries: &[u32],
     recheck: crate::Recheck,
-) -> Result<Vec<Decided>, GpuError> {
-    let decide = |e: &[u32]| -> Result<Decided, GpuError> {
-        let (k, ia, tag) = (e[0], e[1], e[2]);
+) -> Result<Vec<GpuCollision>, GpuError> {
+    let n_pairs = p.frames.len();
+    let counts: Vec<(u32, u32)> = p
+        .tris
+        .iter()
+        .map(|(a, b)| (a.triangle_count() as u32, b.triangle_count() as u32))
+        .collect();
+    // Pass 1: check every entry and count each body pair's share.
+    let mut starts = vec![0usize; n_pairs + 1];
+    let mut uncertain = vec![0usize; n_pairs];
+    for e in entries.chunks_exact(4) {
+        let (k, ia, tag) = (e[0] as usize, e[1], e[2]);
         let ib = tag & !UNCERTAIN_FLAG;
-        let (Some(frame), Some((ta, tb))) = (p.frames.get(k as usize), p.tris.get(k as usize))
-        else {
+        let Some(&(na, nb)) = counts.get(k) else {
             return Err(GpuError::Internal(format!("pair index {k} out of range")));
         };
-        if ia as usize >= ta.triangle_count() || ib as usize >= tb.triangle_count() {
+        if ia >= na || ib >= nb {
             return Err(GpuError::Internal(format!(
                 "pair {k}: triangle pair ({ia}, {ib}) out of range"
             )));
         }
-        let uncertain = tag & UNCERTAIN_FLAG != 0;
+        starts[k + 1] += 1;
+        uncertain[k] += usize::from(tag & UNCERTAIN_FLAG != 0);
+    }
+    for k in 0..n_pairs {
+        starts[k + 1] += starts[k];
+    }
+    // Pass 2: scatter the keys by body pair, in the GPU's order.
+    let mut keys = vec![0u64; starts[n_pairs]];
+    let mut next = starts.clone();
+    for e in entries.chunks_exact(4) {
+        let k = e[0] as usize;
+        let (ib, flagged) = (e[2] & !UNCERTAIN_FLAG, e[2] & UNCERTAIN_FLAG != 0);
+        keys[next[k]] = (u64::from(e[1]) << 32) | (u64::from(ib) << 1) | u64::from(flagged);
+        next[k] += 1;
+    }
+    let mut segments: Vec<(usize, &mut [u64])> = Vec::with_capacity(n_pairs);
+    let mut rest = keys.as_mut_slice();
+    for k in 0..n_pairs {
+        let (seg, tail) = rest.split_at_mut(starts[k + 1] - starts[k]);
+        segments.push((k, seg));
+        rest = tail;
+    }
+    let all = recheck == crate::Recheck::All;
+    let decide = |(k, seg): (usize, &mut [u64])| -> Result<GpuCollision, GpuError> {
+        let (frame, (ta, tb)) = (&p.frames[k], &p.tris[k]);
         // With Recheck::All the GPU's "touching" is not trusted either (WGSL's float rules, a
-        // driver bug); the exact test's filter decides most pairs in floats, but fetching both
-        // triangles misses the cache.
-        let touch = if uncertain || recheck == crate::Recheck::All {
-            let (ta, tb) = (ta.triangle(ia as usize), tb.triangle(ib as usize));
-            frcd_tritri::intersects(Method::Exact, &ta, &frame.triangle(&tb))
-        } else {
-            true
+        // driver bug). The exact test's filter decides most pairs in floats; their cost is
+        // fetching both triangles from meshes the GPU's work left cold. So a block's triangles
+        // are fetched first, in one loop of independent loads that the processor overlaps,
+        // then tested. Returns the certified pairs the test refuted.
+        let (ia_tris, ib_tris) = (ta.indices(), tb.indices());
+        let (a_verts, b_verts) = (ta.vertices(), tb.vertices());
+        let test_block = |block: &mut [u64]| -> usize {
+            const NONE: Triangle = Triangle::new(DVec3::ZERO, DVec3::ZERO, DVec3::ZERO);
+            let mut corners = [([0u32; 3], [0u32; 3]); GATHER];
+            let mut at = [0usize; GATHER];
+            let mut flagged = [false; GATHER];
+            let mut n = 0;
+            for (i, key) in block.iter_mut().enumerate() {
+                let f = *key & 1 != 0;
+                *key &= !1;
+                if f || all {
+                    let (ia, ib) = ((*key >> 32) as usize, (*key as u32 >> 1) as usize);
+                    corners[n] = (ia_tris[ia], ib_tris[ib]);
+                    (at[n], flagged[n]) = (i, f);
+                    n += 1;
+                }
+            }
+            let mut fetched = [(NONE, NONE); GATHER];
+            for (f, (ca, cb)) in fetched.iter_mut().zip(&corners).take(n) {
+                let v = |verts: &[DVec3], c: [u32; 3]| {
+                    Triangle::new(
+                        verts[c[0] as usize],
+                        verts[c[1] as usize],
+                        verts[c[2] as usize],
+                    )
+                };
+                *f = (v(a_verts, *ca), v(b_verts, *cb));
+            }
+            let mut refuted = 0;
+            for j in 0..n {
+                let (a, b) = &fetched[j];
+                if !frcd_tritri::intersects(Method::Exact, a, &frame.triangle(b)) {
+                    block[at[j]] |= 1;
+                    refuted += usize::from(!flagged[j]);
+                }
+            }
+            refuted
         };
-        Ok(Decided {
-            k,
-            ia,
-            ib,
-            uncertain,
-            touch,
+        let tested = if all { seg.len() } else { uncertain[k] };
+        #[cfg(feature = "parallel")]
+        let refuted: usize = if tested >= PARALLEL_DECISIONS {
+            use rayon::prelude::*;
+            seg.par_chunks_mut(GATHER).map(test_block).sum()
+        } else {
+            seg.chunks_mut(GATHER).map(test_block).sum()
+        };
+        #[cfg(not(feature = "parallel"))]
+        let refuted: usize = seg.chunks_mut(GATHER).map(test_block).sum();
+        let _ = tested;
+        seg.sort_unstable();
+        if seg.windows(2).any(|w| w[0] >> 1 == w[1] >> 1) {
+            return Err(GpuError::Internal(
+                "a triangle pair was reported twice".into(),
+            ));
+        }
+        let certified = starts[k + 1] - starts[k] - uncertain[k];
+        Ok(GpuCollision {
+            pairs: seg
+                .iter()
+                .filter(|&&key| key & 1 == 0)
+                .map(|&key| ((key >> 32) as u32, key as u32 >> 1))
+                .collect(),
+            gpu_decided: certified - refuted,
+            gpu_refuted: refuted,
+            uncertain: uncertain[k],
+            ..GpuCollision::default()
         })
     };
     #[cfg(feature = "parallel")]
     if entries.len() / 4 >= PARALLEL_DECISIONS {
         use rayon::prelude::*;
-        return entries.par_chunks_exact(4).map(decide).collect();
+        return segments.into_par_iter().map(decide).collect();
     }
-    entries.chunks_exact(4).map(decide).collect()
-}
-
-/// Sorts every answer's pairs (rayon's pool for large batches with the `parallel` feature);
-/// a pair reported twice is an internal error.
-fn sort_pairs(results: &mut [GpuCollision], reported: usize) -> Result<(), GpuError> {
-    let sort = |r: &mut GpuCollision| -> Result<(), GpuError> {
-        r.pairs.sort_unstable();
-        let before = r.pairs.len();
-        r.pairs.dedup();
-        if r.pairs.len() != before {
-            return Err(GpuError::Internal(
-                "a triangle pair was reported twice".into(),
-            ));
-        }
-        Ok(())
-    };
-    #[cfg(feature = "parallel")]
-    if reported >= PARALLEL_DECISIONS {
-        use rayon::prelude::*;
-        return results.par_iter_mut().try_for_each(sort);
-    }
-    let _ = reported;
-    results.iter_mut().try_for_each(sort)
+    segments.into_iter().map(decide).collect()
 }
 
 /// Timestamps a batch writes with pass timers on (0: too deep to time).
@@ -953,19 +1019,7 @@ impl GpuContext {
             answer.timings.gpu_total = Some(span(ticks[0], ticks[last]));
         }
         let deciding = std::time::Instant::now();
-        let mut results = vec![GpuCollision::default(); p.frames.len()];
-        for d in decide_all(p, &entries, self.recheck)? {
-            let r = &mut results[d.k as usize];
-            match (d.uncertain, d.touch) {
-                (true, _) => r.uncertain += 1,
-                (false, true) => r.gpu_decided += 1,
-                (false, false) => r.gpu_refuted += 1,
-            }
-            if d.touch {
-                r.pairs.push((d.ia, d.ib));
-            }
-        }
-        sort_pairs(&mut results, entries.len() / 4)?;
+        let mut results = decide_entries(p, &entries, self.recheck)?;
         for (r, info) in results.iter_mut().zip(&p.infos) {
             r.exact_offsets = info.fix[0] != 0;
             r.levels = answer.levels;
@@ -977,5 +1031,200 @@ impl GpuContext {
         answer.results = results;
         answer.timings.decide = deciding.elapsed();
         Ok(std::mem::take(answer))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two meshes of two triangles each: A's triangle 0 and B's triangle 1 cross, every other
+    /// pair is far apart (B's poses are the identity, so the frame is too).
+    fn two_by_two() -> Prepared {
+        let tri = |o: DVec3| {
+            vec![
+                o + DVec3::new(-1.0, -1.0, 0.0),
+                o + DVec3::new(1.0, -1.0, 0.0),
+                o + DVec3::new(0.0, 1.0, 0.0),
+            ]
+        };
+        let mesh = |a: Vec<DVec3>, b: Vec<DVec3>| {
+            let vertices = [a, b].concat();
+            Arc::new(TriMesh::new(vertices, vec![[0, 1, 2], [3, 4, 5]]).expect("valid mesh"))
+        };
+        // A: triangle 0 in the plane z = 0 at the origin, triangle 1 far away.
+        let a = mesh(tri(DVec3::ZERO), tri(DVec3::new(50.0, 0.0, 0.0)));
+        // B: triangle 0 far away, triangle 1 standing in the plane y = 0 through A's triangle 0.
+        let standing: Vec<DVec3> = tri(DVec3::ZERO)
+            .into_iter()
+            .map(|v| DVec3::new(v.x, 0.0, v.y))
+            .collect();
+        let b = mesh(tri(DVec3::new(0.0, 50.0, 0.0)), standing);
+        let frame = RelativeFrame::new(&Pose::IDENTITY, &Pose::IDENTITY);
+        Prepared {
+            infos: Vec::new(),
+            frames: vec![frame, frame],
+            tris: vec![(a.clone(), b.clone()), (a, b)],
+            levels: 0,
+            leaf_pairs: 0,
+            exact: false,
+        }
+    }
+
+    fn entry(k: u32, ia: u32, ib: u32, uncertain: bool) -> [u32; 4] {
+        [k, ia, ib | if uncertain { UNCERTAIN_FLAG } else { 0 }, 0]
+    }
+
+    #[test]
+    fn reported_pairs_are_decided_counted_and_sorted_per_body_pair() {
+        let p = two_by_two();
+        // Body pair 1 gets the pairs out of order; body pair 0 gets a certified pair that does
+        // not touch (a GPU breaking its bound) and an uncertain one that does not either.
+        let entries: Vec<u32> = [
+            entry(1, 1, 0, true),
+            entry(0, 0, 1, false),
+            entry(1, 0, 1, false),
+            entry(0, 1, 1, false),
+            entry(0, 1, 0, true),
+        ]
+        .concat();
+        let all = decide_entries(&p, &entries, crate::Recheck::All).expect("valid entries");
+        assert_eq!(all[0].pairs, vec![(0, 1)]);
+        assert_eq!(
+            (all[0].gpu_decided, all[0].gpu_refuted, all[0].uncertain),
+            (1, 1, 1)
+        );
+        assert_eq!(all[1].pairs, vec![(0, 1)]);
+        assert_eq!(
+            (all[1].gpu_decided, all[1].gpu_refuted, all[1].uncertain),
+            (1, 0, 1)
+        );
+        // Trusting the certified pairs keeps the refuted one and still tests the uncertain ones.
+        let trusted =
+            decide_entries(&p, &entries, crate::Recheck::Uncertain).expect("valid entries");
+        assert_eq!(trusted[0].pairs, vec![(0, 1), (1, 1)]);
+        assert_eq!(
+            (
+                trusted[0].gpu_decided,
+                trusted[0].gpu_refuted,
+                trusted[0].uncertain
+            ),
+            (2, 0, 1)
+        );
+        assert_eq!(trusted[1].pairs, vec![(0, 1)]);
+    }
+
+    #[test]
+    fn bad_entries_are_internal_errors() {
+        let p = two_by_two();
+        for bad in [
+            entry(2, 0, 0, false),
+            entry(0, 2, 0, false),
+            entry(0, 0, 2, true),
+        ] {
+            let err = decide_entries(&p, &bad, crate::Recheck::All).unwrap_err();
+            assert!(matches!(err, GpuError::Internal(_)), "{err}");
+        }
+        // Twice, also where the exact test drops one copy (uncertain and disjoint) and not the
+        // other (certified, taken as reported).
+        for (twice, recheck) in [
+            (
+                [entry(0, 0, 1, false), entry(0, 0, 1, true)],
+                crate::Recheck::Uncertain,
+            ),
+            (
+                [entry(1, 1, 1, true), entry(1, 1, 1, false)],
+                crate::Recheck::Uncertain,
+            ),
+            (
+                [entry(1, 1, 1, false), entry(1, 1, 1, false)],
+                crate::Recheck::All,
+            ),
+        ] {
+            let err = decide_entries(&p, &twice.concat(), recheck).unwrap_err();
+            assert!(err.to_string().contains("twice"), "{err}");
+        }
+    }
+
+    #[test]
+    fn a_large_batch_decides_every_reported_pair() {
+        // Two rows of 70 triangles, A's flat and B's standing, 10 apart: A's i touches B's j
+        // only where i = j. Body pair 0 reports all 4,900 pairs (above the parallel threshold
+        // within one answer), body pairs 1-3 a few each; some flagged uncertain.
+        const N: u32 = 70;
+        let row = |standing: bool| {
+            let mut vertices = Vec::new();
+            for i in 0..N {
+                let x = 10.0 * f64::from(i);
+                for (u, v) in [(-1.0, -1.0), (1.0, -1.0), (0.0, 1.0)] {
+                    vertices.push(if standing {
+                        DVec3::new(x + u, 0.0, v)
+                    } else {
+                        DVec3::new(x + u, v, 0.0)
+                    });
+                }
+            }
+            let indices = (0..N).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+            Arc::new(TriMesh::new(vertices, indices).expect("valid mesh"))
+        };
+        let (a, b) = (row(false), row(true));
+        let frame = RelativeFrame::new(&Pose::IDENTITY, &Pose::IDENTITY);
+        let p = Prepared {
+            infos: Vec::new(),
+            frames: vec![frame; 4],
+            tris: vec![(a, b); 4],
+            levels: 0,
+            leaf_pairs: 0,
+            exact: false,
+        };
+        let flagged = |i: u32, j: u32| (i * 7 + j).is_multiple_of(5);
+        let mut entries = Vec::new();
+        for i in (0..N).rev() {
+            for j in 0..N {
+                entries.extend(entry(0, i, j, flagged(i, j)));
+            }
+        }
+        for k in 1..4u32 {
+            entries.extend(entry(k, k + 1, k, false));
+            entries.extend(entry(k, k, k, k == 2));
+        }
+        for recheck in [crate::Recheck::All, crate::Recheck::Uncertain] {
+            let got = decide_entries(&p, &entries, recheck).expect("valid entries");
+            let n_flagged = (0..N)
+                .flat_map(|i| (0..N).map(move |j| flagged(i, j)))
+                .filter(|&f| f)
+                .count();
+            let certified_apart = (0..N)
+                .flat_map(|i| (0..N).map(move |j| (i, j)))
+                .filter(|&(i, j)| i != j && !flagged(i, j))
+                .count();
+            let r = &got[0];
+            assert_eq!(r.uncertain, n_flagged);
+            if recheck == crate::Recheck::All {
+                assert_eq!(r.pairs, (0..N).map(|i| (i, i)).collect::<Vec<_>>());
+                assert_eq!(r.gpu_refuted, certified_apart);
+            } else {
+                // The certified pairs are taken as reported; the flagged ones are decided.
+                let want: Vec<(u32, u32)> = (0..N)
+                    .flat_map(|i| (0..N).map(move |j| (i, j)))
+                    .filter(|&(i, j)| i == j || !flagged(i, j))
+                    .collect();
+                assert_eq!(r.pairs, want);
+                assert_eq!(r.gpu_refuted, 0);
+            }
+            assert_eq!(
+                r.gpu_decided + r.gpu_refuted + r.uncertain,
+                (N * N) as usize
+            );
+            for (k, r) in got.iter().enumerate().skip(1) {
+                let k = k as u32;
+                let want = if recheck == crate::Recheck::All {
+                    vec![(k, k)]
+                } else {
+                    vec![(k, k), (k + 1, k)]
+                };
+                assert_eq!(r.pairs, want, "body pair {k}");
+            }
+        }
     }
 }
