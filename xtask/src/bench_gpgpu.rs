@@ -122,6 +122,8 @@ struct Breakdown {
     decide_ms: f64,
     /// GPU chain, its traversal levels, its triangle pass (pass timers only).
     gpu_ms: Option<[f64; 3]>,
+    /// Each traversal level's GPU time (pass timers only; else empty).
+    levels_ms: Vec<f64>,
 }
 
 impl Breakdown {
@@ -157,6 +159,18 @@ impl Breakdown {
                     med(&|t| ms(t.gpu_triangles.unwrap_or_default())),
                 ]
             }),
+            levels_ms: if timed {
+                let n = samples
+                    .iter()
+                    .map(|t| t.gpu_levels.len())
+                    .max()
+                    .unwrap_or(0);
+                (0..n)
+                    .map(|i| med(&|t| t.gpu_levels.get(i).map_or(0.0, |&d| ms(d))))
+                    .collect()
+            } else {
+                Vec::new()
+            },
         }
     }
 
@@ -835,6 +849,22 @@ pub fn run(mut o: Opts) -> Result<()> {
             )?;
         }
         writeln!(md)?;
+        if breakdowns.iter().any(|b| !b.levels_ms.is_empty()) {
+            writeln!(
+                md,
+                "GPU time of each traversal level in µs (medians; the first level starts at the roots):
+"
+            )?;
+            for b in breakdowns.iter().filter(|b| !b.levels_ms.is_empty()) {
+                let levels: Vec<String> = b
+                    .levels_ms
+                    .iter()
+                    .map(|x| format!("{:.0}", x * 1e3))
+                    .collect();
+                writeln!(md, "- {}: {}", b.what, levels.join(", "))?;
+            }
+            writeln!(md)?;
+        }
     }
     let checker_start = md.len();
     if !checker_rows.is_empty() {

@@ -531,14 +531,21 @@ fn leaf_pair(p: u32, na: Node, nb: Node) {
     }
 }
 
+// The x extent of the grid `control.wgsl`'s `set_args` made for `m` entries (the same formula):
+// read from the counts rather than `@builtin(num_workgroups)`, which D3D12 reports as 0 when
+// wgpu's indirect-call validation is off (frcd-gpgpu's own instances turn it off).
+fn grid_x(m: u32) -> u32 {
+    return min((m + WG - 1u) / WG, params.caps.z);
+}
+
 // One listed triangle pair per invocation: the triangle test, and the pair appended to the
 // output (`frontier_out` is bound to the output buffer here) unless it is certainly disjoint.
 @compute @workgroup_size(64)
 fn triangles(@builtin(workgroup_id) wid: vec3<u32>,
-             @builtin(num_workgroups) nwg: vec3<u32>,
              @builtin(local_invocation_index) lid: u32) {
-    let idx = (wid.y * nwg.x + wid.x) * WG + lid;
-    if idx >= min(atomicLoad(&state.tris), params.caps2.x) {
+    let m = min(atomicLoad(&state.tris), params.caps2.x);
+    let idx = (wid.y * grid_x(m) + wid.x) * WG + lid;
+    if idx >= m {
         return;
     }
     let entry = frontier_in[idx];
@@ -573,9 +580,8 @@ fn triangles(@builtin(workgroup_id) wid: vec3<u32>,
 
 @compute @workgroup_size(64)
 fn traverse(@builtin(workgroup_id) wid: vec3<u32>,
-            @builtin(num_workgroups) nwg: vec3<u32>,
             @builtin(local_invocation_index) lid: u32) {
-    let idx = (wid.y * nwg.x + wid.x) * WG + lid;
+    let idx = (wid.y * grid_x(state.cur) + wid.x) * WG + lid;
     if idx >= state.cur {
         return;
     }

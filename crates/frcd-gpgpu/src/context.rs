@@ -236,10 +236,15 @@ impl GpuContext {
 
     fn headless_locked(options: &HeadlessOptions) -> Result<Self, GpuError> {
         // Adapter and device through the shared setup of frcd-gpu.
+        // Every indirect dispatch here takes arguments `control.wgsl`'s `set_args` computed within
+        // the device's limits (the capacities are checked in `QueryScratch::ensure`), and the
+        // shaders derive their grid from the counts, not `num_workgroups`: wgpu's validation of
+        // them (a dispatch and a barrier per traversal level) is skipped.
         let adapter = frcd_gpu::request_adapter(&frcd_gpu::AdapterOptions {
             backends: options.backends,
             low_power: options.low_power,
             force_fallback_adapter: options.force_fallback_adapter,
+            skip_indirect_validation: true,
         })
         .map_err(setup_error)?;
         let info = adapter.get_info();
@@ -300,10 +305,17 @@ impl GpuContext {
         check_limits(&limits, &info.name)?;
         // A driver that rejects a shader or pipeline gives a typed error, not a panic.
         let creating = frcd_gpu::creation_lock();
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        // All three filters: a driver that fails to compile a pipeline reports an internal
+        // error, not a validation one (NVIDIA's GL through EGL on an H200, once wgpu's own
+        // indirect-validation pipelines no longer failed the device first).
+        let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+        let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let pipes = Pipelines::new(&device);
         let arena = crate::mesh::Arena::new(&device, &pipes.arena_bgl, &limits, arena);
-        let failed = pollster::block_on(scope.pop());
+        let oom = pollster::block_on(oom.pop());
+        let internal = pollster::block_on(internal.pop());
+        let failed = oom.or(internal).or(pollster::block_on(validation.pop()));
         drop(creating);
         if let Some(e) = failed {
             // Display of a wgpu error is only its kind; the description names the cause.

@@ -237,16 +237,13 @@ impl QueryScratch {
                 return Ok(());
             }
         }
-        // A level dispatches ceil(n / 64) workgroups as an x × y grid.
-        let groups = ctx.limits.max_compute_workgroups_per_dimension as u64;
-        let dispatchable = crate::context::WG as u64 * groups * groups;
-        if self.frontier_cap as u64 > dispatchable {
-            return Err(GpuError::CapacityExceeded {
-                what: "frontier (workgroups per dimension squared)",
-                needed: self.frontier_cap as u64,
-                limit: dispatchable,
-            });
-        }
+        // A level (and the triangle pass) dispatches ceil(n / 64) workgroups as an x × y grid:
+        // the capacities stop at what one dispatch can cover, which keeps every indirect
+        // argument within the device's limits (the context skips wgpu's validation of them);
+        // `run` refuses a batch that needs more.
+        let most = dispatchable(ctx);
+        self.frontier_cap = self.frontier_cap.min(most);
+        self.tri_cap = self.tri_cap.min(most);
         let fsize = self.frontier_cap as u64 * ENTRY_BYTES;
         let osize = self.output_cap as u64 * ENTRY_BYTES;
         let tsize = self.tri_cap as u64 * ENTRY_BYTES;
@@ -342,11 +339,17 @@ impl QueryScratch {
     }
 }
 
-/// A batch checked and converted for the GPU; independent of the meshes' lifetimes.
-/// The triangles of A and B of one body pair (shared with the meshes).
+/// Entries one x × y dispatch of 64-invocation workgroups covers on `ctx`'s device (at most
+/// `u32::MAX`).
+fn dispatchable(ctx: &GpuContext) -> u32 {
+    let groups = ctx.limits.max_compute_workgroups_per_dimension as u64;
+    (crate::context::WG as u64 * groups * groups).min(u32::MAX as u64) as u32
+}
+
 /// The two meshes of a pair (shared with their trees, not copied), for the exact re-decision.
 type TrianglePair = (Arc<TriMesh>, Arc<TriMesh>);
 
+/// A batch checked and converted for the GPU; independent of the meshes' lifetimes.
 struct Prepared {
     /// One `PairInfo` per pair.
     infos: Vec<PairInfo>,
@@ -966,6 +969,25 @@ impl GpuContext {
             answer.readbacks += 1;
             let (cur, out_count, needed) = (state.cur, state.out, state.needed);
             let mut rerun = false;
+            let most = dispatchable(self);
+            for (what, count) in [
+                (
+                    "node pairs one level lists (workgroups per dimension squared × 64)",
+                    needed,
+                ),
+                (
+                    "triangle pairs one batch lists (workgroups per dimension squared × 64)",
+                    state.tris,
+                ),
+            ] {
+                if count > most {
+                    return Err(GpuError::CapacityExceeded {
+                        what,
+                        needed: count as u64,
+                        limit: most as u64,
+                    });
+                }
+            }
             if needed > bufs.frontier_cap {
                 scratch.frontier_cap = needed.max(bufs.frontier_cap.saturating_mul(2));
                 rerun = true;

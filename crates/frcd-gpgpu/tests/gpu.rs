@@ -898,6 +898,81 @@ fn adapter_and_device(
     Some((adapter, device, queue))
 }
 
+/// A device allowing only 8 workgroups per dimension, on an instance without wgpu's
+/// indirect-call validation (as frcd-gpgpu's own instances are made): levels and triangle
+/// lists of more than 8 × 64 entries run as x × y grids whose x the shaders derive from the
+/// counts (`grid_x`), and the batch still equals the oracle.
+#[test]
+fn two_dimensional_grids_without_indirect_validation() {
+    use frcd_gpgpu::wgpu;
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+    desc.flags
+        .remove(wgpu::InstanceFlags::VALIDATION_INDIRECT_CALL);
+    let instance = wgpu::Instance::new(desc);
+    let adapter = match pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
+        &instance, None,
+    )) {
+        Ok(a) => a,
+        Err(e) => {
+            assert!(!require_gpu(), "FRCD_REQUIRE_GPU=1 but no adapter: {e}");
+            println!("SKIP: no adapter: {e}");
+            return;
+        }
+    };
+    let limits = wgpu::Limits {
+        max_compute_workgroups_per_dimension: 8,
+        ..adapter.limits()
+    };
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        required_limits: limits,
+        ..Default::default()
+    }))
+    .expect("device");
+    let ctx = GpuContext::from_adapter(&adapter, device, queue).expect("limits suffice");
+    let a = body(&ctx, shapes::icosphere(1.0, 3));
+    let poses: Vec<(Pose, Pose)> = (0..6)
+        .map(|k| {
+            let s = k as f64 / 6.0;
+            let dir = DVec3::new((6.0 * s).cos(), (6.0 * s).sin(), 0.3 - s).normalize();
+            let at = DVec3::new(4.0 * k as f64, 0.0, 0.0);
+            (
+                Pose::from_translation(at),
+                Pose::new(at + 0.9 * dir, DQuat::from_rotation_z(s)),
+            )
+        })
+        .collect();
+    let batch: Vec<_> = poses
+        .iter()
+        .map(|(pa, pb)| (&a.gpu, pa, &a.gpu, pb))
+        .collect();
+    let got = ctx
+        .collide_batch(&batch, &mut QueryScratch::default())
+        .expect("every level fits 8 × 8 × 64 entries");
+    let mut reported = 0;
+    for (k, (pa, pb)) in poses.iter().enumerate() {
+        let want = oracle::pairs(&a.mesh, pa, &a.mesh, pb);
+        assert_eq!(got.results[k].pairs, want, "pair {k}");
+        let r = &got.results[k];
+        reported += r.gpu_decided + r.gpu_refuted + r.uncertain;
+    }
+    // More than one row of 8 workgroups of 64 in the triangle pass at least.
+    assert!(reported > 8 * 64, "{reported} reported pairs");
+    // A batch whose levels need more than one dispatch can cover: a typed error, not a
+    // dispatch beyond the device's limits (nothing validates the arguments on this instance).
+    let big = body(&ctx, shapes::icosphere(1.0, 5));
+    let batch: Vec<_> = poses
+        .iter()
+        .map(|(pa, pb)| (&big.gpu, pa, &big.gpu, pb))
+        .collect();
+    match ctx.collide_batch(&batch, &mut QueryScratch::default()) {
+        Err(GpuError::CapacityExceeded { needed, limit, .. }) => {
+            assert_eq!(limit, 8 * 8 * 64);
+            assert!(needed > limit, "{needed}");
+        }
+        other => panic!("expected CapacityExceeded, got {other:?}"),
+    }
+}
+
 #[test]
 fn callers_device_is_used_and_its_limits_checked() {
     use frcd_gpgpu::wgpu;

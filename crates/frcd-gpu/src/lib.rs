@@ -155,6 +155,14 @@ pub struct AdapterOptions {
     pub low_power: bool,
     /// Ask for the fallback (software) adapter only.
     pub force_fallback_adapter: bool,
+    /// Make the instance without wgpu's validation of indirect dispatch and draw arguments
+    /// (`wgpu::InstanceFlags::VALIDATION_INDIRECT_CALL`), unless `WGPU_VALIDATION_INDIRECT_CALL`
+    /// is set. wgpu validates each indirect call with an extra compute dispatch and barrier
+    /// (about 10 µs per call on an H200); without it an out-of-limit argument is undefined
+    /// behaviour, and on D3D12 `@builtin(num_workgroups)` reads 0. Only for callers whose every
+    /// indirect call computes its arguments within the device's limits and whose shaders do not
+    /// read `num_workgroups` (frcd-gpgpu's).
+    pub skip_indirect_validation: bool,
 }
 
 /// A headless adapter (no surface).
@@ -163,7 +171,15 @@ pub fn request_adapter(options: &AdapterOptions) -> Result<wgpu::Adapter, SetupE
     if let Some(b) = options.backends {
         desc.backends = b;
     }
-    pick_adapter(desc, *options == AdapterOptions::default(), options)
+    if options.skip_indirect_validation
+        && std::env::var_os("WGPU_VALIDATION_INDIRECT_CALL").is_none()
+    {
+        desc.flags
+            .remove(wgpu::InstanceFlags::VALIDATION_INDIRECT_CALL);
+    }
+    let from_env =
+        options.backends.is_none() && !options.low_power && !options.force_fallback_adapter;
+    pick_adapter(desc, from_env, options)
 }
 
 /// A headless adapter on an instance the caller describes (its backends, flags, ...), for
