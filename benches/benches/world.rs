@@ -15,9 +15,16 @@
 //! disturbed of its steps on each pool, summed over the cycle, and their ratio (give it several
 //! cycles: `FRCD_WORLD_SECS`).
 //!
+//! The `world/broad` lines time the broad phase alone ([`World::overlapping_pairs`]) on many
+//! small boxes with about 4 neighbours each, moving a little every step: scattered through a
+//! cube (the sweep's hard case: every box shares its x range with about n^(2/3) others) and
+//! strung along y (a train laid along another axis than x), at 4,096 to 65,536 bodies
+//! (`FRCD_WORLD_BROAD_MAX` raises the top, e.g. 262144). `FRCD_WORLD_ONLY=broad|step` runs one part.
+//!
 //! ```text
 //! cargo bench -p frcd-benches --bench world -- --warm-up-time 1 --measurement-time 3
 //! FRCD_WORLD_SECS=20 cargo bench -p frcd-benches --bench world -- step_ratio  # longer ratio run
+//! FRCD_WORLD_ONLY=broad cargo bench -p frcd-benches --bench world      # the broad phase alone
 //! ```
 
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -164,7 +171,86 @@ fn load() -> String {
         .unwrap_or_else(|_| "?".into())
 }
 
+/// The `world/broad` lines: median time of `overlapping_pairs` over coherent steps.
+fn bench_broad() {
+    let cube = Arc::new(ObbTree::build(
+        &shapes::cuboid(DVec3::splat(0.5)),
+        &BuildOptions::default(),
+    ));
+    let top: usize = std::env::var("FRCD_WORLD_BROAD_MAX")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(65_536);
+    for layout in ["cube", "along y"] {
+        let mut n = 4096;
+        while n <= top {
+            let mut rng = Rng::new(n as u64 + layout.len() as u64);
+            // Unit boxes at density 4 / (4/3 π 2³) per unit volume: about 4 neighbours each.
+            let volume = n as f64 * (4.0 / 3.0 * std::f64::consts::PI * 8.0) / 4.0;
+            let extent = match layout {
+                "cube" => DVec3::splat(volume.cbrt()),
+                _ => {
+                    let side = (volume / 400.0).sqrt();
+                    DVec3::new(side, 400.0, side)
+                }
+            };
+            let centres: Vec<DVec3> = (0..n)
+                .map(|_| {
+                    DVec3::new(
+                        rng.range(0.0, extent.x),
+                        rng.range(0.0, extent.y),
+                        rng.range(0.0, extent.z),
+                    )
+                })
+                .collect();
+            let mut w = World::new(WorldOptions::default());
+            let ids: Vec<BodyId> = centres
+                .iter()
+                .map(|&c| {
+                    w.add_body(cube.clone(), Pose::from_translation(c), false)
+                        .expect("valid pose")
+                })
+                .collect();
+            let mut times = Vec::new();
+            let mut pairs = 0;
+            for k in 0..12 {
+                let t = k as f64 * 0.05;
+                let updates: Vec<(BodyId, Pose)> = ids
+                    .iter()
+                    .zip(&centres)
+                    .enumerate()
+                    .map(|(i, (&id, &c))| {
+                        let phase = i as f64 * 0.37 + t;
+                        let wobble = DVec3::new(phase.sin(), phase.cos(), (2.0 * phase).sin());
+                        (id, Pose::from_translation(c + 0.05 * wobble))
+                    })
+                    .collect();
+                w.set_poses(&updates).expect("valid poses");
+                let t0 = Instant::now();
+                pairs = black_box(w.overlapping_pairs(0.0)).len();
+                if k > 1 {
+                    times.push(t0.elapsed().as_secs_f64());
+                }
+            }
+            println!(
+                "world/broad {layout}: {n} bodies, {pairs} overlapping pairs, {:.3} ms median of {} coherent steps (load average {})",
+                median(times.clone()) * 1e3,
+                times.len(),
+                load()
+            );
+            n *= 4;
+        }
+    }
+}
+
 fn bench_world(c: &mut Criterion) {
+    let only = std::env::var("FRCD_WORLD_ONLY").unwrap_or_default();
+    if only != "step" {
+        bench_broad();
+    }
+    if only == "broad" {
+        return;
+    }
     let s = scene();
     let (mut w1, ids1) = world(&s, 1);
     let (mut w2, ids2) = world(&s, 2);

@@ -234,7 +234,9 @@ struct StepStats {
 ///
 /// - **Handles** carry a slot index, a generation and the world's serial: a handle of a removed
 ///   body, or of another world, is refused with a typed error, never silently aliased.
-/// - **Broad phase**: the bodies' world boxes sorted by `min.x` and swept. The sort is an
+/// - **Broad phase**: the bodies' world boxes, copied into one contiguous array each step,
+///   sorted along the axis their centres spread most (x, y or z; kept unless another spreads
+///   twice as much) and swept. The sort is an
 ///   insertion sort on last step's order (near linear under coherent motion) with a guard that
 ///   switches to a full sort when it would exceed `resort_factor · n` swaps. [`World::teleport`]
 ///   is O(1): the teleported bodies are taken out and merged back in at the next step, in
@@ -644,8 +646,7 @@ impl World {
         self.broad
             .sort(&self.slots, self.options.resort_factor as usize);
         let mut raw = Vec::new();
-        self.broad
-            .sweep(&self.slots, margin.max(0.0) * 0.5, &mut raw);
+        self.broad.sweep(margin.max(0.0) * 0.5, &mut raw);
         raw.sort_unstable();
         raw.into_iter()
             .map(|(i, j)| (self.handle(i), self.handle(j)))

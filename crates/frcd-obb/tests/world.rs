@@ -313,3 +313,94 @@ fn clearance_matches_the_oracle() {
     }
     assert!(close > touching && touching > 0, "{close} {touching}");
 }
+
+/// The broad phase against all pairs of boxes: scenes strung along x, y and z and filling a
+/// cube (the sweep axis follows the spread, with hysteresis), bodies moving a little, jumping,
+/// teleported, removed and added, static ones among them, and a margin.
+#[test]
+fn overlapping_pairs_equal_all_pairs_of_boxes_along_any_axis() {
+    let trees = [
+        cube(),
+        Arc::new(ObbTree::build(
+            &shapes::cuboid(DVec3::new(1.5, 0.2, 0.4)),
+            &BuildOptions::default(),
+        )),
+    ];
+    let mut rng = StdRng::seed_from_u64(41);
+    let mut w = World::new(WorldOptions::default());
+    let spread_of = |layout: usize| match layout {
+        0 => DVec3::new(120.0, 6.0, 6.0),
+        1 => DVec3::new(6.0, 120.0, 6.0),
+        2 => DVec3::new(6.0, 6.0, 120.0),
+        _ => DVec3::splat(14.0),
+    };
+    let place = |rng: &mut StdRng, spread: DVec3| {
+        let c = DVec3::new(
+            rng.random_range(0.0..spread.x),
+            rng.random_range(0.0..spread.y),
+            rng.random_range(0.0..spread.z),
+        );
+        Pose::new(
+            c,
+            DQuat::from_axis_angle(
+                DVec3::new(0.3, 0.5, 0.8).normalize(),
+                rng.random_range(0.0..6.0),
+            ),
+        )
+    };
+    let mut ids = Vec::new();
+    for k in 0..300 {
+        let pose = place(&mut rng, spread_of(0));
+        ids.push(w.add_body(trees[k % 2].clone(), pose, k % 17 == 0).unwrap());
+    }
+    let mut checked = 0;
+    for step in 0..40 {
+        let layout = step / 10;
+        let spread = spread_of(layout);
+        // At each new layout every body jumps there (a switch of the sweep axis).
+        for (k, &id) in ids.iter().enumerate() {
+            let pose = if step % 10 == 0 {
+                place(&mut rng, spread)
+            } else {
+                let p = w.pose(id).unwrap();
+                Pose::new(
+                    p.translation + DVec3::splat(0.1 * ((k + step) % 3) as f64 - 0.1),
+                    p.rotation,
+                )
+            };
+            if k % 23 == 5 {
+                w.teleport(id, pose).unwrap();
+            } else {
+                w.set_pose(id, pose).unwrap();
+            }
+        }
+        if step % 7 == 3 {
+            let gone = ids.swap_remove(rng.random_range(0..ids.len()));
+            w.remove_body(gone).unwrap();
+            let pose = place(&mut rng, spread);
+            ids.push(w.add_body(trees[step % 2].clone(), pose, false).unwrap());
+        }
+        let margin = [0.0, 0.3][step % 2];
+        let got = w.overlapping_pairs(margin);
+        let mut want = Vec::new();
+        let live: Vec<_> = w.bodies().collect();
+        for (i, &a) in live.iter().enumerate() {
+            for &b in &live[i + 1..] {
+                let (ba, bb) = (w.body_aabb(a).unwrap(), w.body_aabb(b).unwrap());
+                let apart = (0..3)
+                    .any(|k| ba.min[k] - bb.max[k] > margin || bb.min[k] - ba.max[k] > margin);
+                if !apart && w.is_pair_tested(a, b) {
+                    want.push(if a.index() < b.index() {
+                        (a, b)
+                    } else {
+                        (b, a)
+                    });
+                }
+            }
+        }
+        want.sort_unstable_by_key(|&(a, b)| (a.index(), b.index()));
+        assert_eq!(got, want, "step {step}");
+        checked += want.len();
+    }
+    assert!(checked > 400, "the scenes overlap: {checked} pairs");
+}
