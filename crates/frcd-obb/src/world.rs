@@ -236,7 +236,9 @@ struct StepStats {
 ///   body, or of another world, is refused with a typed error, never silently aliased.
 /// - **Broad phase**: the bodies' world boxes, copied into one contiguous array each step,
 ///   sorted along the axis their centres spread most (x, y or z; kept unless another spreads
-///   twice as much) and swept. The sort is an
+///   twice as much) and swept; where a sample of the sorted boxes shows the sweep would compare
+///   each box with more than 24 others (1,024 bodies or more filling a volume), a uniform grid
+///   finds the same pairs instead (65,536 boxes in a cube: 240 → 27 ms). The sort is an
 ///   insertion sort on last step's order (near linear under coherent motion) with a guard that
 ///   switches to a full sort when it would exceed `resort_factor · n` swaps. [`World::teleport`]
 ///   is O(1): the teleported bodies are taken out and merged back in at the next step, in

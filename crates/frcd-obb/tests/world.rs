@@ -404,3 +404,58 @@ fn overlapping_pairs_equal_all_pairs_of_boxes_along_any_axis() {
     }
     assert!(checked > 400, "the scenes overlap: {checked} pairs");
 }
+
+/// Many bodies filling a volume (where the broad phase lays out a grid instead of sweeping),
+/// with a few large ones among them and a margin: the same pairs as all pairs of boxes.
+#[test]
+fn overlapping_pairs_of_a_crowded_volume_equal_all_pairs_of_boxes() {
+    let small = cube();
+    let large = Arc::new(ObbTree::build(
+        &shapes::cuboid(DVec3::new(16.0, 0.5, 0.5)),
+        &BuildOptions::default(),
+    ));
+    let mut rng = StdRng::seed_from_u64(7);
+    let mut w = World::new(WorldOptions::default());
+    let mut ids = Vec::new();
+    for k in 0..1600 {
+        let c = DVec3::new(
+            rng.random_range(0.0..30.0),
+            rng.random_range(0.0..30.0),
+            rng.random_range(-1e6..-1e6 + 30.0),
+        );
+        let tree = if k % 200 == 0 {
+            large.clone()
+        } else {
+            small.clone()
+        };
+        let pose = Pose::new(c, DQuat::from_rotation_z(rng.random_range(0.0..1.5)));
+        ids.push(w.add_body(tree, pose, k % 31 == 0).unwrap());
+    }
+    let mut checked = 0;
+    for step in 0..4 {
+        for &id in &ids {
+            let p = w.pose(id).unwrap();
+            let d = DVec3::new(0.05, -0.03, 0.02) * step as f64;
+            w.set_pose(id, Pose::new(p.translation + d, p.rotation))
+                .unwrap();
+        }
+        let margin = [0.0, 0.25, 1.0, 0.0][step];
+        let got = w.overlapping_pairs(margin);
+        let boxes: Vec<_> = ids.iter().map(|&id| w.body_aabb(id).unwrap()).collect();
+        let mut want = Vec::new();
+        for i in 0..ids.len() {
+            for j in i + 1..ids.len() {
+                let (a, b) = (&boxes[i], &boxes[j]);
+                let apart =
+                    (0..3).any(|k| a.min[k] - b.max[k] > margin || b.min[k] - a.max[k] > margin);
+                if !apart && w.is_pair_tested(ids[i], ids[j]) {
+                    want.push((ids[i], ids[j]));
+                }
+            }
+        }
+        want.sort_unstable_by_key(|&(a, b)| (a.index(), b.index()));
+        assert_eq!(got, want, "step {step}");
+        checked += want.len();
+    }
+    assert!(checked > 2000, "the volume is crowded: {checked} pairs");
+}

@@ -144,20 +144,24 @@ impl BroadPhase {
     }
 
     /// Pushes `(lo, hi)` slot pairs whose boxes, each grown by `half_margin`, overlap, as of the
-    /// last [`BroadPhase::sort`].
+    /// last [`BroadPhase::sort`]. Sweeps the sorted array, unless a sample says the sweep would
+    /// compare each box with more than [`GRID_FROM`] others (bodies filling a volume: a box
+    /// shares its range along any one axis with about n^(2/3) others); then a uniform grid.
     pub(super) fn sweep(&self, half_margin: f64, out: &mut Vec<(u32, u32)>) {
         let margin = 2.0 * half_margin;
         let s = &self.swept;
+        if s.len() >= GRID_MIN_BODIES
+            && sampled_sweep_length(s, margin) > GRID_FROM
+            && grid_pairs(s, margin, out)
+        {
+            return;
+        }
         for (p, bi) in s.iter().enumerate() {
             for bj in &s[p + 1..] {
                 if bj.lo - bi.hi > margin {
                     break;
                 }
-                if bi.rest[0] - bj.rest[1] > margin
-                    || bj.rest[0] - bi.rest[1] > margin
-                    || bi.rest[2] - bj.rest[3] > margin
-                    || bj.rest[2] - bi.rest[3] > margin
-                {
+                if apart_across(bi, bj, margin) {
                     continue;
                 }
                 out.push((bi.slot.min(bj.slot), bi.slot.max(bj.slot)));
@@ -165,6 +169,153 @@ impl BroadPhase {
         }
     }
 }
+
+/// Boxes the sweep may compare each box with, on average, before the grid takes over.
+const GRID_FROM: f64 = 24.0;
+/// Below this many bodies the sweep is always cheap enough.
+const GRID_MIN_BODIES: usize = 1024;
+/// Boxes sampled to estimate the sweep's length.
+const SAMPLES: usize = 64;
+
+/// Whether `a` and `b` are more than `margin` apart along one of the two axes across the sweep.
+fn apart_across(a: &Swept, b: &Swept, margin: f64) -> bool {
+    a.rest[0] - b.rest[1] > margin
+        || b.rest[0] - a.rest[1] > margin
+        || a.rest[2] - b.rest[3] > margin
+        || b.rest[2] - a.rest[3] > margin
+}
+
+/// The mean number of boxes the sweep compares a box with, over evenly spaced samples (a binary
+/// search each: the sweep of box `p` stops at the first box starting more than `margin` past
+/// its end).
+fn sampled_sweep_length(s: &[Swept], margin: f64) -> f64 {
+    let step = (s.len() / SAMPLES).max(1);
+    let mut total = 0usize;
+    let mut n = 0usize;
+    for p in (0..s.len()).step_by(step) {
+        let bi = &s[p];
+        let end = p + 1 + s[p + 1..].partition_point(|bj| bj.lo - bi.hi <= margin);
+        total += end - p - 1;
+        n += 1;
+    }
+    total as f64 / n.max(1) as f64
+}
+
+/// Whether two boxes are within `margin` of each other on every axis: the sweep's test,
+/// written the same way so that both paths give the same pairs to the last bit.
+fn within(a: &Swept, b: &Swept, margin: f64) -> bool {
+    !(b.lo - a.hi > margin || a.lo - b.hi > margin || apart_across(a, b, margin))
+}
+
+/// The overlapping pairs through a uniform grid. Each box covers the cells of
+/// `[lower, upper + margin]` on every axis (the upper bound rounded outward, so a box covers
+/// every point `x` with `x - upper <= margin` as [`within`] computes it); the entries are sorted
+/// by cell, and a pair that passes [`within`] is reported in the one cell holding the largest of
+/// its lower corners (both boxes cover that point, so the pair is found there and only there).
+/// Cells are twice the median box's largest covered side; a box covering more than
+/// [`GRID_SPAN`] cells along an axis is tested against every other box instead. False (nothing
+/// pushed) where no grid can be laid out (non-finite boxes, more than 2^21 cells along an
+/// axis): the caller sweeps.
+fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
+    let up = |x: f64| {
+        let g = x + margin;
+        g + (g.abs() + margin) * (4.0 * f64::EPSILON)
+    };
+    let cover = |b: &Swept| -> ([f64; 3], [f64; 3]) {
+        (
+            [b.lo, b.rest[0], b.rest[2]],
+            [up(b.hi), up(b.rest[1]), up(b.rest[3])],
+        )
+    };
+    let mut sides: Vec<f64> = s
+        .iter()
+        .map(|b| {
+            let (lo, hi) = cover(b);
+            (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max)
+        })
+        .collect();
+    let mid = sides.len() / 2;
+    let (_, median, _) = sides.select_nth_unstable_by(mid, f64::total_cmp);
+    let h = 2.0 * *median;
+    let mut origin = [f64::INFINITY; 3];
+    let mut top = [f64::NEG_INFINITY; 3];
+    for b in s {
+        let (lo, hi) = cover(b);
+        for k in 0..3 {
+            origin[k] = origin[k].min(lo[k]);
+            top[k] = top[k].max(hi[k]);
+        }
+    }
+    let cells = |k: usize| ((top[k] - origin[k]) / h).floor();
+    // NaN fails every comparison: a non-finite box or size refuses the grid.
+    let fits = |k: usize| cells(k) < (1u64 << 21) as f64;
+    if !(h.is_finite() && h > 0.0 && (0..3).all(fits)) {
+        return false;
+    }
+    // Monotone in x, so a box's cell range holds the cell of every point it covers.
+    let cell = |x: f64, k: usize| ((x - origin[k]) / h).floor() as u64;
+    let key = |c: [u64; 3]| (c[0] << 42) | (c[1] << 21) | c[2];
+    let mut entries: Vec<(u64, u32)> = Vec::with_capacity(s.len() * 4);
+    let mut big: Vec<u32> = Vec::new();
+    for (i, b) in s.iter().enumerate() {
+        let (lo, hi) = cover(b);
+        let c0 = [cell(lo[0], 0), cell(lo[1], 1), cell(lo[2], 2)];
+        let c1 = [cell(hi[0], 0), cell(hi[1], 1), cell(hi[2], 2)];
+        if (0..3).any(|k| c1[k] - c0[k] >= GRID_SPAN) {
+            big.push(i as u32);
+            continue;
+        }
+        for x in c0[0]..=c1[0] {
+            for y in c0[1]..=c1[1] {
+                for z in c0[2]..=c1[2] {
+                    entries.push((key([x, y, z]), i as u32));
+                }
+            }
+        }
+    }
+    entries.sort_unstable();
+    let mut start = 0;
+    while start < entries.len() {
+        let k = entries[start].0;
+        let end = start + entries[start..].partition_point(|e| e.0 == k);
+        let run = &entries[start..end];
+        for (x, &(_, i)) in run.iter().enumerate() {
+            let bi = &s[i as usize];
+            for &(_, j) in &run[x + 1..] {
+                let bj = &s[j as usize];
+                if !within(bi, bj, margin) {
+                    continue;
+                }
+                let corner = [
+                    cell(bi.lo.max(bj.lo), 0),
+                    cell(bi.rest[0].max(bj.rest[0]), 1),
+                    cell(bi.rest[2].max(bj.rest[2]), 2),
+                ];
+                if key(corner) == k {
+                    out.push((bi.slot.min(bj.slot), bi.slot.max(bj.slot)));
+                }
+            }
+        }
+        start = end;
+    }
+    // Boxes too large for the grid: against every other box (a pair of two of them once).
+    for (x, &b) in big.iter().enumerate() {
+        let bi = &s[b as usize];
+        for (j, bj) in s.iter().enumerate() {
+            let other_big = big.binary_search(&(j as u32));
+            if j == b as usize || other_big.is_ok_and(|y| y < x) {
+                continue;
+            }
+            if within(bi, bj, margin) {
+                out.push((bi.slot.min(bj.slot), bi.slot.max(bj.slot)));
+            }
+        }
+    }
+    true
+}
+
+/// Cells a box may cover along one axis before it leaves the grid for the all-pairs list.
+const GRID_SPAN: u64 = 4;
 
 /// Insertion sort by [`Swept::cmp`]; false (order unspecified) once it exceeds `limit` swaps.
 fn insertion_sort(v: &mut [Swept], limit: usize) -> bool {
