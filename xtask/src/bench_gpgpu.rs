@@ -22,8 +22,10 @@
 //!
 //! Many bodies (`--bodies 1,16,256,1024,4096,16384`): the rough colliding set of n boxes scattered
 //! with about 4 neighbours each, by four methods, answers checked equal: the CPU all-pairs test,
-//! the CPU sort-and-sweep (sort by min x, scan forward; the `World` broad phase's algorithm with
-//! a fresh sort, one thread), the GPU all-pairs pass (`overlapping_bodies_all_pairs`) and the GPU
+//! the CPU broad phase (`frcd_obb::overlapping_boxes`, the `World`'s: a sweep along the widest
+//! axis, or a uniform grid where the boxes fill a volume; one thread; before 2026-11-27 this
+//! column was a sweep along x, which grows as n^1.6 on this scatter), the GPU all-pairs pass
+//! (`overlapping_bodies_all_pairs`) and the GPU
 //! sort-and-sweep (`overlapping_bodies`: bitonic sort in WGSL, scan, one submission). The
 //! all-pairs columns are left out above 4,096 bodies. `--boxes-only` runs this section alone
 //! (plus the checker section when asked for).
@@ -290,7 +292,7 @@ struct BoxRow {
     pairs: usize,
     /// CPU all-pairs (None above the all-pairs limit).
     cpu_all: Option<f64>,
-    /// CPU sort-and-sweep, one thread.
+    /// CPU broad phase (`frcd_obb::overlapping_boxes`), one thread.
     cpu: f64,
     /// GPU all-pairs pass (None above the all-pairs limit).
     gpu_all: Option<f64>,
@@ -300,34 +302,6 @@ struct BoxRow {
 
 /// Largest body count timed with the O(n²) methods.
 const ALL_PAIRS_LIMIT: usize = 4096;
-
-/// The CPU sort-and-sweep over boxes (the `World` broad phase's algorithm, fresh sort): sort by
-/// `min.x`, each box scans forward while the next `min.x` is within its `max.x`. Sorted pairs.
-fn cpu_sweep(boxes: &[Aabb]) -> Vec<(u32, u32)> {
-    let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
-    order.sort_unstable_by(|&a, &b| {
-        boxes[a as usize]
-            .min
-            .x
-            .total_cmp(&boxes[b as usize].min.x)
-            .then(a.cmp(&b))
-    });
-    let mut out = Vec::new();
-    for (p, &i) in order.iter().enumerate() {
-        let bi = &boxes[i as usize];
-        for &j in &order[p + 1..] {
-            let bj = &boxes[j as usize];
-            if bj.min.x > bi.max.x {
-                break;
-            }
-            if bi.intersects(bj) {
-                out.push((i.min(j), i.max(j)));
-            }
-        }
-    }
-    out.sort_unstable();
-    out
-}
 
 /// Body-pair poses of a step: B crossing A at `0.9 + 0.1 k / K` along a turning direction.
 fn step_poses(k: usize) -> Vec<(Pose, Pose)> {
@@ -633,14 +607,14 @@ pub fn run(mut o: Opts) -> Result<()> {
             out
         };
         let small = n <= ALL_PAIRS_LIMIT;
-        let want = cpu_sweep(&boxes);
+        let want = frcd_obb::overlapping_boxes(&boxes, 0.0);
         let got = ctx.overlapping_bodies(&boxes, &mut box_scratch)?;
         if got.pairs != want {
             bail!("{n} bodies: GPU sweep pairs differ from the CPU's");
         }
         if small {
             if cpu_pairs() != want {
-                bail!("{n} bodies: CPU sweep differs from CPU all-pairs");
+                bail!("{n} bodies: the CPU broad phase differs from CPU all-pairs");
             }
             let all = ctx.overlapping_bodies_all_pairs(&boxes, &mut all_scratch)?;
             if all.pairs != want {
@@ -653,7 +627,7 @@ pub fn run(mut o: Opts) -> Result<()> {
             })
         });
         let cpu = median_ms(o.runs, || {
-            std::hint::black_box(cpu_sweep(&boxes));
+            std::hint::black_box(frcd_obb::overlapping_boxes(&boxes, 0.0));
         });
         let gpu_all = small.then(|| {
             median_ms(o.runs, || {
@@ -670,7 +644,7 @@ pub fn run(mut o: Opts) -> Result<()> {
             );
         });
         println!(
-            "{n} bodies: {} pairs, cpu all-pairs {cpu_all:?} ms, cpu sweep {cpu:.2} ms, gpu all-pairs {gpu_all:?} ms, gpu sweep {gpu:.2} ms",
+            "{n} bodies: {} pairs, cpu all-pairs {cpu_all:?} ms, cpu broad phase {cpu:.2} ms, gpu all-pairs {gpu_all:?} ms, gpu sweep {gpu:.2} ms",
             want.len()
         );
         box_rows.push(BoxRow {
@@ -901,12 +875,12 @@ pub fn run(mut o: Opts) -> Result<()> {
         writeln!(
             md,
             "Boxes scattered with about 4 neighbours each; every method's pairs checked equal. \
-             CPU columns on one thread; GPU columns include the upload, sort, sweep, readback, \
+             CPU columns on one thread (the broad phase: `frcd_obb::overlapping_boxes`, a sweep along the widest axis or a uniform grid); GPU columns include the upload, sort, sweep, readback, \
              f64 re-check of uncertain pairs and the final sort of the pairs.\n"
         )?;
         writeln!(
             md,
-            "| bodies | overlapping pairs | CPU all-pairs ms | CPU sort-and-sweep ms | GPU all-pairs ms | GPU sort-and-sweep ms | GPU sweep / CPU sweep | GPU sweep / GPU all-pairs |"
+            "| bodies | overlapping pairs | CPU all-pairs ms | CPU broad phase ms | GPU all-pairs ms | GPU sort-and-sweep ms | GPU sweep / CPU broad phase | GPU sweep / GPU all-pairs |"
         )?;
         writeln!(md, "|---:|---:|---:|---:|---:|---:|---:|---:|")?;
         let opt = |x: Option<f64>| x.map_or("—".to_string(), |v| format!("{v:.2}"));
@@ -930,7 +904,7 @@ pub fn run(mut o: Opts) -> Result<()> {
             .map(|r| format!("{} bodies", r.bodies))
             .collect();
         let cb = crossover(
-            "GPU sort-and-sweep vs CPU sort-and-sweep",
+            "GPU sort-and-sweep vs CPU broad phase",
             &sizes,
             &box_rows.iter().map(|r| r.cpu).collect::<Vec<_>>(),
             &box_rows.iter().map(|r| r.gpu).collect::<Vec<_>>(),

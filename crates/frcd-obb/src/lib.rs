@@ -51,6 +51,6 @@ pub use saved::{LoadError, SavedTree};
 pub use tree::{BuildOptions, Node, ObbTree, SplitMethod};
 pub use world::{
     Apart, BodyContact, BodyId, Clearance, ClearanceCache, ClearanceWork, SpinProfile, StepReport,
-    StepTiming, World, WorldError, WorldOptions, pair_clearance, pair_clearance_apart,
-    pair_clearance_cached, pair_clearance_spin,
+    StepTiming, World, WorldError, WorldOptions, overlapping_boxes, pair_clearance,
+    pair_clearance_apart, pair_clearance_cached, pair_clearance_spin,
 };

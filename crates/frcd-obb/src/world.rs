@@ -3,6 +3,8 @@
 
 mod broad;
 mod clearance;
+
+pub use broad::overlapping_boxes;
 mod handle;
 
 pub use clearance::{

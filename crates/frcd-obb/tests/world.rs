@@ -459,3 +459,51 @@ fn overlapping_pairs_of_a_crowded_volume_equal_all_pairs_of_boxes() {
     }
     assert!(checked > 2000, "the volume is crowded: {checked} pairs");
 }
+
+/// `overlapping_boxes` against all pairs: boxes of mixed sizes (a few long ones) filling a
+/// cube (the grid) and strung along z (the sweep), with and without a margin.
+#[test]
+fn overlapping_boxes_equal_all_pairs() {
+    use frcd_geom::Aabb;
+    let mut rng = StdRng::seed_from_u64(3);
+    for (n, spread) in [
+        (1800, DVec3::splat(25.0)),
+        (400, DVec3::new(3.0, 3.0, 150.0)),
+    ] {
+        let boxes: Vec<Aabb> = (0..n)
+            .map(|k| {
+                let c = DVec3::new(
+                    rng.random_range(0.0..spread.x),
+                    rng.random_range(0.0..spread.y),
+                    rng.random_range(0.0..spread.z),
+                );
+                let half = if k % 97 == 0 {
+                    DVec3::new(12.0, 0.4, 0.4)
+                } else {
+                    DVec3::new(
+                        rng.random_range(0.1..0.9),
+                        rng.random_range(0.1..0.9),
+                        rng.random_range(0.1..0.9),
+                    )
+                };
+                Aabb::new(c - half, c + half)
+            })
+            .collect();
+        for margin in [0.0, 0.3] {
+            let mut want = Vec::new();
+            for i in 0..n {
+                for j in i + 1..n {
+                    let (a, b) = (&boxes[i], &boxes[j]);
+                    if !(0..3).any(|k| a.min[k] - b.max[k] > margin || b.min[k] - a.max[k] > margin)
+                    {
+                        want.push((i as u32, j as u32));
+                    }
+                }
+            }
+            let got = frcd_obb::overlapping_boxes(&boxes, margin);
+            assert_eq!(got, want, "{n} boxes, margin {margin}");
+            assert!(want.len() > n / 4, "{n} boxes overlap: {}", want.len());
+        }
+    }
+    assert!(frcd_obb::overlapping_boxes(&[], 0.0).is_empty());
+}

@@ -317,6 +317,43 @@ fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
 /// Cells a box may cover along one axis before it leaves the grid for the all-pairs list.
 const GRID_SPAN: u64 = 4;
 
+/// Every pair of boxes within `margin` of each other on every axis (`a.min - b.max <= margin`
+/// and `b.min - a.max <= margin`, computed as written), as index pairs `(i, j)`, `i < j`,
+/// sorted: the [`World`](crate::World)'s broad phase on plain boxes, for a caller that keeps
+/// its own bodies. The boxes are sorted along the axis their centres spread most and swept,
+/// or laid on a uniform grid where the sweep would be long (1,024 boxes or more filling a
+/// volume). Non-finite boxes give unspecified pairs (never a panic).
+///
+/// ```
+/// use frcd_geom::{Aabb, DVec3};
+/// let unit = |x: f64, y: f64| Aabb::new(DVec3::new(x, y, 0.0), DVec3::new(x + 1.0, y + 1.0, 1.0));
+/// let boxes = [unit(0.0, 0.0), unit(5.0, 0.0), unit(0.5, 0.5), unit(1.2, 0.0)];
+/// assert_eq!(frcd_obb::overlapping_boxes(&boxes, 0.0), vec![(0, 2), (2, 3)]);
+/// assert_eq!(frcd_obb::overlapping_boxes(&boxes, 0.25), vec![(0, 2), (0, 3), (2, 3)]);
+/// ```
+pub fn overlapping_boxes(boxes: &[Aabb], margin: f64) -> Vec<(u32, u32)> {
+    let tagged: Vec<(Aabb, u32)> = boxes
+        .iter()
+        .enumerate()
+        .map(|(i, b)| (*b, i as u32))
+        .collect();
+    let axis = sweep_axis(&tagged, 0);
+    let mut swept: Vec<Swept> = tagged
+        .iter()
+        .map(|(b, i)| Swept::new(b, *i, axis))
+        .collect();
+    swept.sort_unstable_by(Swept::cmp);
+    let phase = BroadPhase {
+        swept,
+        axis,
+        ..BroadPhase::default()
+    };
+    let mut out = Vec::new();
+    phase.sweep(margin.max(0.0) * 0.5, &mut out);
+    out.sort_unstable();
+    out
+}
+
 /// Insertion sort by [`Swept::cmp`]; false (order unspecified) once it exceeds `limit` swaps.
 fn insertion_sort(v: &mut [Swept], limit: usize) -> bool {
     let mut swaps = 0usize;
