@@ -214,8 +214,9 @@ fn within(a: &Swept, b: &Swept, margin: f64) -> bool {
 /// its lower corners (both boxes cover that point, so the pair is found there and only there).
 /// Cells are twice the median box's largest covered side; a box covering more than
 /// [`GRID_SPAN`] cells along an axis is tested against every other box instead. False (nothing
-/// pushed) where no grid can be laid out (non-finite boxes, more than 2^21 cells along an
-/// axis): the caller sweeps.
+/// pushed) where no grid can be laid out or it would not pay (non-finite boxes, more than 2^21
+/// cells along an axis, more than [`GRID_ENTRIES`] entries per box, many long boxes): the
+/// caller sweeps.
 fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
     let up = |x: f64| {
         let g = x + margin;
@@ -255,14 +256,33 @@ fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
     // Monotone in x, so a box's cell range holds the cell of every point it covers.
     let cell = |x: f64, k: usize| ((x - origin[k]) / h).floor() as u64;
     let key = |c: [u64; 3]| (c[0] << 42) | (c[1] << 21) | c[2];
-    let mut entries: Vec<(u64, u32)> = Vec::with_capacity(s.len() * 4);
-    let mut big: Vec<u32> = Vec::new();
-    for (i, b) in s.iter().enumerate() {
+    // First the sizes: a grid that would need more than `GRID_ENTRIES` entries per box, or
+    // more boxes in the all-pairs list than `s.len() / 64` (at least 64), is refused, so the
+    // memory stays linear and the long boxes' pass stays small; the sweep runs instead.
+    let ranges = |b: &Swept| {
         let (lo, hi) = cover(b);
-        let c0 = [cell(lo[0], 0), cell(lo[1], 1), cell(lo[2], 2)];
-        let c1 = [cell(hi[0], 0), cell(hi[1], 1), cell(hi[2], 2)];
+        (
+            [cell(lo[0], 0), cell(lo[1], 1), cell(lo[2], 2)],
+            [cell(hi[0], 0), cell(hi[1], 1), cell(hi[2], 2)],
+        )
+    };
+    let mut big: Vec<u32> = Vec::new();
+    let mut total = 0u64;
+    for (i, b) in s.iter().enumerate() {
+        let (c0, c1) = ranges(b);
         if (0..3).any(|k| c1[k] - c0[k] >= GRID_SPAN) {
             big.push(i as u32);
+        } else {
+            total += (0..3).map(|k| c1[k] - c0[k] + 1).product::<u64>();
+        }
+    }
+    if total > GRID_ENTRIES * s.len() as u64 || big.len() > (s.len() / 64).max(64) {
+        return false;
+    }
+    let mut entries: Vec<(u64, u32)> = Vec::with_capacity(total as usize);
+    for (i, b) in s.iter().enumerate() {
+        let (c0, c1) = ranges(b);
+        if (0..3).any(|k| c1[k] - c0[k] >= GRID_SPAN) {
             continue;
         }
         for x in c0[0]..=c1[0] {
@@ -316,6 +336,8 @@ fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
 
 /// Cells a box may cover along one axis before it leaves the grid for the all-pairs list.
 const GRID_SPAN: u64 = 4;
+/// Grid entries per box above which the grid is refused (memory stays linear in the boxes).
+const GRID_ENTRIES: u64 = 16;
 
 /// Every pair of boxes within `margin` of each other on every axis (`a.min - b.max <= margin`
 /// and `b.min - a.max <= margin`, computed as written), as index pairs `(i, j)`, `i < j`,
