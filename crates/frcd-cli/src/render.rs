@@ -183,7 +183,12 @@ fn draw(
     if width > max || height > max {
         bail!("image size {width}x{height} exceeds the device's texture limit {max}");
     }
+    // All three filters: a driver may fail a pipeline with an internal error rather than a
+    // validation one (as NVIDIA's GL through EGL did with frcd-gpgpu's on an H200), and an
+    // error no scope catches panics in wgpu's default handler.
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+    let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
     let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("frcd render"),
         source: wgpu::ShaderSource::Wgsl(SHADER.into()),
@@ -364,7 +369,9 @@ fn draw(
         size,
     );
     let index = queue.submit([enc.finish()]);
-    if let Some(e) = pollster::block_on(scope.pop()) {
+    let oom = pollster::block_on(oom.pop());
+    let internal = pollster::block_on(internal.pop());
+    if let Some(e) = oom.or(internal).or(pollster::block_on(scope.pop())) {
         bail!("GPU rendering failed: {}", frcd_gpu::describe(&e));
     }
     let mapped = frcd_gpu::read_back(&device, &readback, readback.size(), index)
