@@ -324,14 +324,18 @@ fn step_poses(k: usize) -> Vec<(Pose, Pose)> {
 }
 
 fn crossover(label: &str, sizes: &[String], cpu: &[f64], gpu: &[f64]) -> String {
-    match (0..sizes.len()).find(|&i| gpu[i] < cpu[i]) {
+    // The smallest size from which the GPU is faster at every larger size; rows where both
+    // times are below the timer's reach (10 µs) say nothing and end the run.
+    let faster = |i: usize| gpu[i] < cpu[i] && cpu[i].max(gpu[i]) >= 0.01;
+    match (0..sizes.len()).rev().take_while(|&i| faster(i)).last() {
         Some(i) => format!(
             "crossover ({label}): GPU faster from {} on ({:.2} ms vs {:.2} ms)",
             sizes[i], gpu[i], cpu[i]
         ),
         None => format!(
-            "crossover ({label}): none in the measured range (GPU slower at every size; best ratio {:.2}×)",
+            "crossover ({label}): none in the measured range (GPU slower at the largest size; best ratio {:.2}×)",
             (0..sizes.len())
+                .filter(|&i| cpu[i] > 0.0)
                 .map(|i| gpu[i] / cpu[i])
                 .fold(f64::INFINITY, f64::min)
         ),
@@ -1108,6 +1112,18 @@ fn checker_row(n: usize, runs: usize) -> Result<CheckerRow> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_crossover_is_where_the_gpu_stays_faster() {
+        let sizes: Vec<String> = ["1", "16", "256", "4096"].map(String::from).to_vec();
+        // Tied at zero, then slower, then faster for good.
+        let line = crossover("t", &sizes, &[0.0, 0.02, 0.5, 9.0], &[0.0, 0.5, 0.3, 1.0]);
+        assert!(line.contains("from 256 on"), "{line}");
+        // Faster at one small size only, slower at the largest: none.
+        let line = crossover("t", &sizes, &[0.0, 0.5, 0.5, 1.0], &[0.0, 0.1, 0.9, 2.0]);
+        assert!(line.contains("none in the measured range"), "{line}");
+        assert!(line.contains("0.20×"), "{line}");
+    }
 
     #[test]
     fn plot_writes_every_series() {
