@@ -11,23 +11,25 @@
 
 use frcd_geom::{DQuat, DVec3, Pose, TriMesh, shapes};
 use frcd_obb::{
-    BuildOptions, FitMethod, Mode, ObbTree, PairCache, Request, SplitMethod, collide,
-    collide_cached, oracle,
+    BodyId, BuildOptions, FitMethod, Mode, ObbTree, PairCache, Request, SplitMethod, World,
+    WorldOptions, collide, collide_cached, oracle, overlapping_boxes,
 };
 use std::path::Path;
+use std::sync::Arc;
 
 /// A target's body: the fuzzer's bytes in, a panic only on a broken invariant.
 pub type Body = fn(&[u8]);
 
 /// The targets, by name, with their bodies (in the order `cargo xtask fuzz` runs them: cheap
 /// parsers first).
-pub const TARGETS: [(&str, Body); 6] = [
+pub const TARGETS: [(&str, Body); 7] = [
     ("stl", stl),
     ("obj", obj),
     ("scene", scene),
     ("trajectory", trajectory),
     ("mesh_tree", mesh_tree),
     ("collide_oracle", collide_oracle),
+    ("world_broad", world_broad),
 ];
 
 /// STL reader (ASCII and binary): any bytes give a mesh or a typed error, never a panic.
@@ -277,5 +279,134 @@ pub fn collide_oracle(data: &[u8]) {
                 );
             }
         }
+    }
+}
+
+/// Differential: the `World`'s broad phase against all pairs of boxes. The input picks a few
+/// hundred bodies, or a crowd of 1,100-1,355 where the grid runs, laid out in a cube or strung
+/// along one axis, near the origin or 10^6 or 10^9 away. The boxes have input-chosen sizes,
+/// some long. The positions come from a generator the input seeds, so a short input makes a
+/// large scene. Then byte-driven edits (moves, teleports, removals, additions, static bodies,
+/// excluded pairs) and queries with a margin. `World::overlapping_pairs` must equal the tested
+/// pairs of bodies whose boxes are within the margin, and `overlapping_boxes` the same pairs
+/// on the plain boxes.
+pub fn world_broad(data: &[u8]) {
+    let mut b = Bytes(data);
+    let flags = b.byte();
+    let crowd = flags & 1 == 1;
+    let n = if crowd {
+        1100 + b.byte() as usize
+    } else {
+        1 + b.byte() as usize
+    };
+    let offset = [0.0, 1e6, -1e9][(flags >> 1) as usize % 3];
+    let layout = (flags >> 3) % 4;
+    let trees: Vec<Arc<ObbTree>> = (0..3)
+        .map(|k| {
+            let s = |x: u8| 0.25 + (x % 16) as f64 * 0.25;
+            let mut h = DVec3::new(s(b.byte()), s(b.byte()), s(b.byte()));
+            if k == 2 {
+                h.x *= 8.0;
+            }
+            Arc::new(ObbTree::build(&shapes::cuboid(h), &BuildOptions::default()))
+        })
+        .collect();
+    let mut seed = u64::from_le_bytes(std::array::from_fn(|_| b.byte())) | 1;
+    let mut next = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        seed
+    };
+    // About 4 neighbours per body at the boxes' typical size.
+    let side = (n as f64 * 12.0).cbrt() * 2.0;
+    let extent = match layout {
+        0 => DVec3::splat(side),
+        1 => DVec3::new(side * 8.0, side / 3.0, side / 3.0),
+        2 => DVec3::new(side / 3.0, side * 8.0, side / 3.0),
+        _ => DVec3::new(side / 3.0, side / 3.0, side * 8.0),
+    };
+    let place = |next: &mut dyn FnMut() -> u64| {
+        let mut u = || (next() >> 11) as f64 / (1u64 << 53) as f64;
+        let c = DVec3::new(u() * extent.x, u() * extent.y, u() * extent.z) + DVec3::splat(offset);
+        let q = DQuat::from_xyzw(u() - 0.5, u() - 0.5, u() - 0.5, u() - 0.5);
+        if q.length_squared() > 1e-6 {
+            Pose::new(c, q)
+        } else {
+            Pose::from_translation(c)
+        }
+    };
+    let mut w = World::new(WorldOptions::default());
+    let mut ids: Vec<BodyId> = Vec::new();
+    for k in 0..n {
+        let pose = place(&mut next);
+        let tree = trees[(next() % 3) as usize].clone();
+        let id = w.add_body(tree, pose, k % 37 == 5).expect("finite pose");
+        ids.push(id);
+    }
+    let ops = if crowd { 2 } else { 8 };
+    for _ in 0..ops {
+        let op = b.byte();
+        if !ids.is_empty() {
+            let k = (next() % ids.len() as u64) as usize;
+            let id = ids[k];
+            match op % 6 {
+                0 | 1 => {
+                    let p = w.pose(id).expect("live");
+                    let d = DVec3::new(b.small(), b.small(), b.small()) * 0.05;
+                    w.set_pose(id, Pose::new(p.translation + d, p.rotation))
+                        .expect("finite pose");
+                }
+                2 => w.teleport(id, place(&mut next)).expect("finite pose"),
+                3 => {
+                    w.remove_body(ids.swap_remove(k)).expect("live");
+                }
+                4 => {
+                    let other = ids[(next() % ids.len() as u64) as usize];
+                    if other != id {
+                        w.exclude_pair(id, other).expect("live pair");
+                    }
+                }
+                _ => {
+                    let tree = trees[(op as usize / 6) % 3].clone();
+                    ids.push(w.add_body(tree, place(&mut next), false).expect("finite"));
+                }
+            }
+        }
+        let margin = [0.0, 0.1, 1.0, 5.0][(op >> 4) as usize % 4];
+        let got = w.overlapping_pairs(margin);
+        let live: Vec<BodyId> = w.bodies().collect();
+        let boxes: Vec<_> = live
+            .iter()
+            .map(|&id| w.body_aabb(id).expect("live"))
+            .collect();
+        let within = |i: usize, j: usize| {
+            let (p, q) = (&boxes[i], &boxes[j]);
+            !(0..3).any(|k| p.min[k] - q.max[k] > margin || q.min[k] - p.max[k] > margin)
+        };
+        let mut want = Vec::new();
+        let mut plain = Vec::new();
+        for i in 0..live.len() {
+            for j in i + 1..live.len() {
+                if within(i, j) {
+                    plain.push((i as u32, j as u32));
+                    if w.is_pair_tested(live[i], live[j]) {
+                        let (a, c) = (live[i], live[j]);
+                        want.push(if a.index() < c.index() {
+                            (a, c)
+                        } else {
+                            (c, a)
+                        });
+                    }
+                }
+            }
+        }
+        want.sort_unstable_by_key(|&(a, c)| (a.index(), c.index()));
+        assert_eq!(got, want, "World::overlapping_pairs differs from all pairs");
+        assert_eq!(
+            overlapping_boxes(&boxes, margin),
+            plain,
+            "overlapping_boxes differs from all pairs"
+        );
     }
 }

@@ -12,13 +12,14 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 /// The targets, in the order they run (cheap parsers first).
-pub const TARGETS: [&str; 6] = [
+pub const TARGETS: [&str; 7] = [
     "stl",
     "obj",
     "scene",
     "trajectory",
     "mesh_tree",
     "collide_oracle",
+    "world_broad",
 ];
 
 /// Figures libFuzzer prints at the end of a run (`-print_final_stats=1`).
