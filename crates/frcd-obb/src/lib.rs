@@ -14,8 +14,9 @@
 //!   whose separated pairs keep their margins against a bound on the motion (no test while the
 //!   margin holds), with a work budget that falls back to a fresh traversal; same answers as
 //!   [`collide`];
-//! - [`World`]: many bodies sharing `Arc<ObbTree>`s, incremental sweep-and-prune and a
-//!   deterministic (rayon-parallel with the default `parallel` feature) narrow phase;
+//! - [`World`]: many bodies sharing `Arc<ObbTree>`s, incremental sweep-and-prune (a grid where
+//!   the boxes crowd a volume; [`overlapping_boxes`] on plain boxes) and a deterministic
+//!   (rayon-parallel with the default `parallel` feature) narrow phase;
 //! - [`oracle`]: the brute-force exact oracle every backend is compared with.
 //!
 //! With [`frcd_tritri::Method::Exact`] (the default) the pairs reported are exactly the

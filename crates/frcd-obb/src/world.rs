@@ -1,5 +1,6 @@
-//! Many bodies: generational handles, an incremental sweep-and-prune broad phase, and a cached,
-//! deterministic, parallel narrow phase whose results are borrowed from the [`World`].
+//! Many bodies: generational handles, an incremental sweep-and-prune broad phase (a grid where
+//! the boxes crowd a volume), and a cached, deterministic, parallel narrow phase whose results
+//! are borrowed from the [`World`].
 
 mod broad;
 mod clearance;
