@@ -16,7 +16,7 @@ pub mod shapes;
 mod topology;
 mod triangle;
 
-pub use bounds::{ABSOLUTE_SLACK, Aabb, Obb, Sphere};
+pub use bounds::{ABSOLUTE_SLACK, Aabb, Obb, Sphere, centre_variance};
 /// glam's f32 vector, for [`TriMesh::from_f32`] (an engine on another glam version passes
 /// `&[[f32; 3]]`, e.g. through `bytemuck::cast_slice`, without copying).
 pub use glam::Vec3;

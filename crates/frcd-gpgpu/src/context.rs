@@ -237,7 +237,8 @@ impl GpuContext {
     fn headless_locked(options: &HeadlessOptions) -> Result<Self, GpuError> {
         // Adapter and device through the shared setup of frcd-gpu.
         // Every indirect dispatch here takes arguments `control.wgsl`'s `set_args` computed within
-        // the device's limits (the capacities are checked in `QueryScratch::ensure`), and the
+        // the device's limits (`QueryScratch::ensure` bounds the capacities, and a batch needing
+        // more gets a typed `CapacityExceeded`), and the
         // shaders derive their grid from the counts, not `num_workgroups`: wgpu's validation of
         // them (a dispatch and a barrier per traversal level) is skipped.
         let adapter = frcd_gpu::request_adapter(&frcd_gpu::AdapterOptions {

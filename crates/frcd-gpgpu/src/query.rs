@@ -476,6 +476,7 @@ fn decide_entries(
             }
             refuted
         };
+        #[cfg(feature = "parallel")]
         let tested = if all { seg.len() } else { uncertain[k] };
         #[cfg(feature = "parallel")]
         let refuted: usize = if tested >= PARALLEL_DECISIONS {
@@ -486,7 +487,6 @@ fn decide_entries(
         };
         #[cfg(not(feature = "parallel"))]
         let refuted: usize = seg.chunks_mut(GATHER).map(test_block).sum();
-        let _ = tested;
         seg.sort_unstable();
         if seg.windows(2).any(|w| w[0] >> 1 == w[1] >> 1) {
             return Err(GpuError::Internal(

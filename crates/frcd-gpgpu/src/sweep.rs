@@ -203,31 +203,8 @@ impl BoxScratch {
 /// The axis along which the box centres spread most (finite, non-empty boxes only): sorting on
 /// it keeps the scans short (a scene strung along y is swept along y).
 fn sweep_axis(boxes: &[Aabb]) -> usize {
-    let mut n = 0.0f64;
-    let mut sum = [0.0f64; 3];
-    let mut sq = [0.0f64; 3];
-    for b in boxes {
-        let c = (b.min + b.max) * 0.5;
-        if !c.is_finite() || b.min.cmpgt(b.max).any() {
-            continue;
-        }
-        n += 1.0;
-        for (a, v) in c.to_array().into_iter().enumerate() {
-            sum[a] += v;
-            sq[a] += v * v;
-        }
-    }
-    if n < 2.0 {
-        return 0;
-    }
-    let var = |a: usize| sq[a] / n - (sum[a] / n).powi(2);
-    let mut best = 0;
-    for a in 1..3 {
-        if var(a) > var(best) {
-            best = a;
-        }
-    }
-    best
+    let var = frcd_geom::centre_variance(boxes);
+    (1..3).fold(0, |best, a| if var[a] > var[best] { a } else { best })
 }
 
 /// `b` with its `axis` component swapped into x (overlap does not depend on the axis order).

@@ -877,9 +877,24 @@ fn adapter_and_device(
     frcd_gpgpu::wgpu::Device,
     frcd_gpgpu::wgpu::Queue,
 )> {
+    adapter_and_device_on(
+        frcd_gpgpu::wgpu::InstanceDescriptor::new_without_display_handle_from_env(),
+        |_| limits,
+    )
+}
+
+/// [`adapter_and_device`] on an instance the test describes, with limits chosen from the
+/// adapter's.
+fn adapter_and_device_on(
+    desc: frcd_gpgpu::wgpu::InstanceDescriptor,
+    limits: impl FnOnce(frcd_gpgpu::wgpu::Limits) -> frcd_gpgpu::wgpu::Limits,
+) -> Option<(
+    frcd_gpgpu::wgpu::Adapter,
+    frcd_gpgpu::wgpu::Device,
+    frcd_gpgpu::wgpu::Queue,
+)> {
     use frcd_gpgpu::wgpu;
-    let instance =
-        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let instance = wgpu::Instance::new(desc);
     let adapter = match pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
         &instance, None,
     )) {
@@ -891,43 +906,25 @@ fn adapter_and_device(
         }
     };
     let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-        required_limits: limits,
+        required_limits: limits(adapter.limits()),
         ..Default::default()
     }))
     .expect("device");
     Some((adapter, device, queue))
 }
 
-/// A device allowing only 8 workgroups per dimension, on an instance without wgpu's
-/// indirect-call validation (as frcd-gpgpu's own instances are made): levels and triangle
-/// lists of more than 8 × 64 entries run as x × y grids whose x the shaders derive from the
-/// counts (`grid_x`), and the batch still equals the oracle.
 #[test]
 fn two_dimensional_grids_without_indirect_validation() {
     use frcd_gpgpu::wgpu;
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
     desc.flags
         .remove(wgpu::InstanceFlags::VALIDATION_INDIRECT_CALL);
-    let instance = wgpu::Instance::new(desc);
-    let adapter = match pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
-        &instance, None,
-    )) {
-        Ok(a) => a,
-        Err(e) => {
-            assert!(!require_gpu(), "FRCD_REQUIRE_GPU=1 but no adapter: {e}");
-            println!("SKIP: no adapter: {e}");
-            return;
-        }
-    };
-    let limits = wgpu::Limits {
+    let Some((adapter, device, queue)) = adapter_and_device_on(desc, |l| wgpu::Limits {
         max_compute_workgroups_per_dimension: 8,
-        ..adapter.limits()
+        ..l
+    }) else {
+        return;
     };
-    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-        required_limits: limits,
-        ..Default::default()
-    }))
-    .expect("device");
     let ctx = GpuContext::from_adapter(&adapter, device, queue).expect("limits suffice");
     let a = body(&ctx, shapes::icosphere(1.0, 3));
     let poses: Vec<(Pose, Pose)> = (0..6)

@@ -466,7 +466,7 @@ impl World {
             }
             self.forget_threshold(t);
         }
-        self.broad.remove(id.index());
+        // The broad phase re-reads every slot at its next sort, so it drops the body then.
         Ok(body.tree)
     }
 

@@ -382,23 +382,7 @@ fn overlapping_pairs_equal_all_pairs_of_boxes_along_any_axis() {
         }
         let margin = [0.0, 0.3][step % 2];
         let got = w.overlapping_pairs(margin);
-        let mut want = Vec::new();
-        let live: Vec<_> = w.bodies().collect();
-        for (i, &a) in live.iter().enumerate() {
-            for &b in &live[i + 1..] {
-                let (ba, bb) = (w.body_aabb(a).unwrap(), w.body_aabb(b).unwrap());
-                let apart = (0..3)
-                    .any(|k| ba.min[k] - bb.max[k] > margin || bb.min[k] - ba.max[k] > margin);
-                if !apart && w.is_pair_tested(a, b) {
-                    want.push(if a.index() < b.index() {
-                        (a, b)
-                    } else {
-                        (b, a)
-                    });
-                }
-            }
-        }
-        want.sort_unstable_by_key(|&(a, b)| (a.index(), b.index()));
+        let want = all_pairs_within(&w, margin);
         assert_eq!(got, want, "step {step}");
         checked += want.len();
     }
@@ -441,19 +425,7 @@ fn overlapping_pairs_of_a_crowded_volume_equal_all_pairs_of_boxes() {
         }
         let margin = [0.0, 0.25, 1.0, 0.0][step];
         let got = w.overlapping_pairs(margin);
-        let boxes: Vec<_> = ids.iter().map(|&id| w.body_aabb(id).unwrap()).collect();
-        let mut want = Vec::new();
-        for i in 0..ids.len() {
-            for j in i + 1..ids.len() {
-                let (a, b) = (&boxes[i], &boxes[j]);
-                let apart =
-                    (0..3).any(|k| a.min[k] - b.max[k] > margin || b.min[k] - a.max[k] > margin);
-                if !apart && w.is_pair_tested(ids[i], ids[j]) {
-                    want.push((ids[i], ids[j]));
-                }
-            }
-        }
-        want.sort_unstable_by_key(|&(a, b)| (a.index(), b.index()));
+        let want = all_pairs_within(&w, margin);
         assert_eq!(got, want, "step {step}");
         checked += want.len();
     }
@@ -493,9 +465,7 @@ fn overlapping_boxes_equal_all_pairs() {
             let mut want = Vec::new();
             for i in 0..n {
                 for j in i + 1..n {
-                    let (a, b) = (&boxes[i], &boxes[j]);
-                    if !(0..3).any(|k| a.min[k] - b.max[k] > margin || b.min[k] - a.max[k] > margin)
-                    {
+                    if boxes_within(&boxes[i], &boxes[j], margin) {
                         want.push((i as u32, j as u32));
                     }
                 }
@@ -506,4 +476,31 @@ fn overlapping_boxes_equal_all_pairs() {
         }
     }
     assert!(frcd_obb::overlapping_boxes(&[], 0.0).is_empty());
+}
+
+/// Whether two boxes are within `margin` of each other on every axis, written as the broad
+/// phase writes it (`min - max > margin` is apart), so the comparison is exact.
+fn boxes_within(a: &frcd_geom::Aabb, b: &frcd_geom::Aabb, margin: f64) -> bool {
+    !(0..3).any(|k| a.min[k] - b.max[k] > margin || b.min[k] - a.max[k] > margin)
+}
+
+/// `World::overlapping_pairs` by brute force: every tested pair of live bodies whose boxes are
+/// within `margin`, as `(lower slot, higher slot)`, sorted.
+fn all_pairs_within(w: &World, margin: f64) -> Vec<(frcd_obb::BodyId, frcd_obb::BodyId)> {
+    let live: Vec<_> = w.bodies().collect();
+    let mut want = Vec::new();
+    for (i, &a) in live.iter().enumerate() {
+        for &b in &live[i + 1..] {
+            let (ba, bb) = (w.body_aabb(a).unwrap(), w.body_aabb(b).unwrap());
+            if boxes_within(&ba, &bb, margin) && w.is_pair_tested(a, b) {
+                want.push(if a.index() < b.index() {
+                    (a, b)
+                } else {
+                    (b, a)
+                });
+            }
+        }
+    }
+    want.sort_unstable_by_key(|&(a, b)| (a.index(), b.index()));
+    want
 }

@@ -70,9 +70,6 @@ impl BroadPhase {
         self.pending.push(i);
     }
 
-    /// The body in slot `i` was removed: the next sort drops it (it re-reads every slot).
-    pub(super) fn remove(&mut self, _i: u32) {}
-
     /// Re-reads every box and sorts them along the sweep axis: removed and pending slots are
     /// taken out (O(n)), the axis is re-chosen (the centres' largest variance, with
     /// hysteresis), the rest is insertion-sorted (near linear under coherent motion; a full
@@ -396,34 +393,9 @@ fn insertion_sort(v: &mut [Swept], limit: usize) -> bool {
 /// The axis along which the box centres spread most (by variance), keeping `current` unless
 /// another spreads [`AXIS_SWITCH`] times more. Non-finite boxes are skipped.
 fn sweep_axis(boxes: &[(Aabb, u32)], current: usize) -> usize {
-    let mut n = 0.0f64;
-    let mut sum = [0.0f64; 3];
-    let mut sq = [0.0f64; 3];
-    // About the first centre, so that a scene far from the origin does not cancel.
-    let origin = boxes
-        .iter()
-        .map(|(b, _)| (b.min + b.max) * 0.5)
-        .find(|c| c.is_finite())
-        .unwrap_or_default();
-    for (b, _) in boxes {
-        let c = (b.min + b.max) * 0.5 - origin;
-        if !c.is_finite() {
-            continue;
-        }
-        n += 1.0;
-        for (a, v) in c.to_array().into_iter().enumerate() {
-            sum[a] += v;
-            sq[a] += v * v;
-        }
-    }
-    if n < 2.0 {
-        return current;
-    }
-    let var = |a: usize| (sq[a] / n - (sum[a] / n).powi(2)).max(0.0);
-    let best = (0..3)
-        .max_by(|&a, &b| var(a).total_cmp(&var(b)))
-        .unwrap_or(current);
-    if var(best) > AXIS_SWITCH * var(current) {
+    let var = frcd_geom::centre_variance(boxes.iter().map(|(b, _)| b));
+    let best = (1..3).fold(0, |best, a| if var[a] > var[best] { a } else { best });
+    if var[best] > AXIS_SWITCH * var[current] {
         best
     } else {
         current
