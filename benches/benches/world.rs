@@ -19,7 +19,10 @@
 //! small boxes with about 4 neighbours each, moving a little every step: scattered through a
 //! cube (the sweep's hard case: every box shares its x range with about n^(2/3) others) and
 //! strung along y (a train laid along another axis than x), at 4,096 to 65,536 bodies
-//! (`FRCD_WORLD_BROAD_MAX` raises the top, e.g. 262144). `FRCD_WORLD_ONLY=broad|step` runs one part.
+//! (`FRCD_WORLD_BROAD_MAX` raises the top, e.g. 262144). Beside it, on the same boxes in the
+//! same steps, parry3d-f64's incremental BVH as rapier drives it (`insert_or_update_partially`
+//! for every moved box, `refit`, `traverse_bvtt_single_tree`), its pair count checked equal.
+//! `FRCD_WORLD_ONLY=broad|step` runs one part.
 //!
 //! ```text
 //! cargo bench -p frcd-benches --bench world -- --warm-up-time 1 --measurement-time 3
@@ -32,6 +35,7 @@ use frcd_benches::scenes::Rng;
 use frcd_geom::shapes::{self, TorusKnotParams, torus_knot};
 use frcd_geom::{DQuat, DVec3, Pose, TriMesh};
 use frcd_obb::{BodyId, BuildOptions, ObbTree, StepTiming, World, WorldOptions};
+use parry3d_f64::bounding_volume::BoundingVolume;
 use std::hint::black_box;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -212,7 +216,10 @@ fn bench_broad() {
                 })
                 .collect();
             let mut times = Vec::new();
+            let mut parry_times = Vec::new();
             let mut pairs = 0;
+            let mut bvh = parry3d_f64::partitioning::Bvh::new();
+            let mut workspace = parry3d_f64::partitioning::BvhWorkspace::default();
             for k in 0..12 {
                 let t = k as f64 * 0.05;
                 let updates: Vec<(BodyId, Pose)> = ids
@@ -228,13 +235,38 @@ fn bench_broad() {
                 w.set_poses(&updates).expect("valid poses");
                 let t0 = Instant::now();
                 pairs = black_box(w.overlapping_pairs(0.0)).len();
+                let frcd = t0.elapsed().as_secs_f64();
+                // The peer on the same boxes (converted outside the timing).
+                let boxes: Vec<parry3d_f64::bounding_volume::Aabb> = ids
+                    .iter()
+                    .map(|&id| {
+                        let b = w.body_aabb(id).expect("live");
+                        let v = |p: DVec3| parry3d_f64::math::Vector::new(p.x, p.y, p.z);
+                        parry3d_f64::bounding_volume::Aabb::new(v(b.min), v(b.max))
+                    })
+                    .collect();
+                let t0 = Instant::now();
+                for (i, b) in boxes.iter().enumerate() {
+                    bvh.insert_or_update_partially(*b, i as u32, 0.0);
+                }
+                bvh.refit(&mut workspace);
+                let mut peer_pairs = 0usize;
+                bvh.traverse_bvtt_single_tree::<false>(&mut workspace, &mut |a, b| {
+                    peer_pairs += usize::from(boxes[a as usize].intersects(&boxes[b as usize]));
+                });
+                let parry = t0.elapsed().as_secs_f64();
+                assert_eq!(peer_pairs, pairs, "parry3d-f64 finds other pairs");
                 if k > 1 {
-                    times.push(t0.elapsed().as_secs_f64());
+                    times.push(frcd);
+                    parry_times.push(parry);
                 }
             }
+            let (m, mp) = (median(times.clone()), median(parry_times.clone()));
             println!(
-                "world/broad {layout}: {n} bodies, {pairs} overlapping pairs, {:.3} ms median of {} coherent steps (load average {})",
-                median(times.clone()) * 1e3,
+                "world/broad {layout}: {n} bodies, {pairs} overlapping pairs, frcd {:.3} ms, parry3d-f64 Bvh {:.3} ms (parry / frcd {:.2}x), medians of {} coherent steps (load average {})",
+                m * 1e3,
+                mp * 1e3,
+                mp / m,
                 times.len(),
                 load()
             );
