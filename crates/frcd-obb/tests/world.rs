@@ -451,6 +451,9 @@ fn overlapping_boxes_equal_all_pairs() {
                 );
                 let half = if k % 97 == 0 {
                     DVec3::new(12.0, 0.4, 0.4)
+                } else if k % 211 == 3 {
+                    // Inverted (min > max): still paired by the formula, never a panic.
+                    DVec3::new(-0.5, 0.6, 0.6)
                 } else {
                     DVec3::new(
                         rng.random_range(0.1..0.9),

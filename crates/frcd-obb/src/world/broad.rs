@@ -263,11 +263,15 @@ fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
             [cell(hi[0], 0), cell(hi[1], 1), cell(hi[2], 2)],
         )
     };
+    // Long boxes, and inverted ones (`min > max`, which `overlapping_boxes` may be given and
+    // `within` still pairs), go to the all-pairs list.
+    let listed =
+        |c0: [u64; 3], c1: [u64; 3]| (0..3).any(|k| c1[k] < c0[k] || c1[k] - c0[k] >= GRID_SPAN);
     let mut big: Vec<u32> = Vec::new();
     let mut total = 0u64;
     for (i, b) in s.iter().enumerate() {
         let (c0, c1) = ranges(b);
-        if (0..3).any(|k| c1[k] - c0[k] >= GRID_SPAN) {
+        if listed(c0, c1) {
             big.push(i as u32);
         } else {
             total += (0..3).map(|k| c1[k] - c0[k] + 1).product::<u64>();
@@ -279,7 +283,7 @@ fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
     let mut entries: Vec<(u64, u32)> = Vec::with_capacity(total as usize);
     for (i, b) in s.iter().enumerate() {
         let (c0, c1) = ranges(b);
-        if (0..3).any(|k| c1[k] - c0[k] >= GRID_SPAN) {
+        if listed(c0, c1) {
             continue;
         }
         for x in c0[0]..=c1[0] {
