@@ -16,12 +16,12 @@
 //! cycles: `FRCD_WORLD_SECS`).
 //!
 //! The `world/broad` lines time the broad phase alone ([`World::overlapping_pairs`]) on many
-//! small boxes with about 4 neighbours each, moving a little every step: scattered through a
-//! cube (the sweep's hard case: every box shares its x range with about n^(2/3) others) and
-//! strung along y (a train laid along another axis than x), at 4,096 to 65,536 bodies
-//! (`FRCD_WORLD_BROAD_MAX` raises the top, e.g. 262144). Beside it, on the same boxes in the
-//! same steps, parry3d-f64's incremental BVH as rapier drives it (`insert_or_update_partially`
-//! for every moved box, `refit`, `traverse_bvtt_single_tree`), its pair count checked equal.
+//! small boxes with about 4 neighbours each: scattered through a cube (where a sweep compares
+//! every box with about n^(2/3) others) and strung along y, at 4,096 to 65,536 bodies
+//! (`FRCD_WORLD_BROAD_MAX` raises the top, e.g. 262144), under three motions
+//! (`FRCD_WORLD_MOTIONS=wobble,drift,shuffle`, see `bench_broad`). Beside it, on the same boxes
+//! in the same steps, parry3d-f64's incremental BVH as rapier drives it, with tight and with
+//! grown boxes, its pair count checked equal.
 //! `FRCD_WORLD_ONLY=broad|step` runs one part.
 //!
 //! ```text
@@ -175,7 +175,19 @@ fn load() -> String {
         .unwrap_or_else(|_| "?".into())
 }
 
-/// The `world/broad` lines: median time of `overlapping_pairs` over coherent steps.
+/// The `world/broad` lines: median time of `overlapping_pairs` per step, beside parry3d-f64's
+/// incremental BVH on the same boxes, under three motions:
+/// - `wobble`: every body moves a little about a fixed place (coherent; the bodies stay in
+///   their grown boxes);
+/// - `drift`: every body moves on at its own speed (0 to 0.02 per step), so about a tenth of
+///   them leave their grown boxes each step;
+/// - `shuffle`: every body is placed anew each step (incoherent: every candidate found afresh).
+///
+/// parry3d-f64 runs as Rapier drives it (`insert_or_update_partially` for every box,
+/// `optimize_incremental`, `refit`, `traverse_bvtt_single_tree`; under `shuffle` a fresh
+/// `Bvh::from_leaves` instead), with tight boxes (margin 0) and with boxes grown by 0.1 (the
+/// unit boxes' slack under frcd's default `box_slack_percent`), its pairs filtered by the
+/// exact box test and counted against frcd's.
 fn bench_broad() {
     let cube = Arc::new(ObbTree::build(
         &shapes::cuboid(DVec3::splat(0.5)),
@@ -185,94 +197,148 @@ fn bench_broad() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(65_536);
-    for layout in ["cube", "along y"] {
-        let mut n = 4096;
-        while n <= top {
-            let mut rng = Rng::new(n as u64 + layout.len() as u64);
-            // Unit boxes at density 4 / (4/3 π 2³) per unit volume: about 4 neighbours each.
-            let volume = n as f64 * (4.0 / 3.0 * std::f64::consts::PI * 8.0) / 4.0;
-            let extent = match layout {
-                "cube" => DVec3::splat(volume.cbrt()),
-                _ => {
-                    let side = (volume / 400.0).sqrt();
-                    DVec3::new(side, 400.0, side)
-                }
-            };
-            let centres: Vec<DVec3> = (0..n)
-                .map(|_| {
-                    DVec3::new(
-                        rng.range(0.0, extent.x),
-                        rng.range(0.0, extent.y),
-                        rng.range(0.0, extent.z),
-                    )
-                })
-                .collect();
-            let mut w = World::new(WorldOptions::default());
-            let ids: Vec<BodyId> = centres
-                .iter()
-                .map(|&c| {
-                    w.add_body(cube.clone(), Pose::from_translation(c), false)
-                        .expect("valid pose")
-                })
-                .collect();
-            let mut times = Vec::new();
-            let mut parry_times = Vec::new();
-            let mut pairs = 0;
-            let mut bvh = parry3d_f64::partitioning::Bvh::new();
-            let mut workspace = parry3d_f64::partitioning::BvhWorkspace::default();
-            for k in 0..12 {
-                let t = k as f64 * 0.05;
-                let updates: Vec<(BodyId, Pose)> = ids
-                    .iter()
-                    .zip(&centres)
-                    .enumerate()
-                    .map(|(i, (&id, &c))| {
-                        let phase = i as f64 * 0.37 + t;
-                        let wobble = DVec3::new(phase.sin(), phase.cos(), (2.0 * phase).sin());
-                        (id, Pose::from_translation(c + 0.05 * wobble))
-                    })
-                    .collect();
-                w.set_poses(&updates).expect("valid poses");
-                let t0 = Instant::now();
-                pairs = black_box(w.overlapping_pairs(0.0)).len();
-                let frcd = t0.elapsed().as_secs_f64();
-                // The peer on the same boxes (converted outside the timing).
-                let boxes: Vec<parry3d_f64::bounding_volume::Aabb> = ids
-                    .iter()
-                    .map(|&id| {
-                        let b = w.body_aabb(id).expect("live");
-                        let v = |p: DVec3| parry3d_f64::math::Vector::new(p.x, p.y, p.z);
-                        parry3d_f64::bounding_volume::Aabb::new(v(b.min), v(b.max))
-                    })
-                    .collect();
-                let t0 = Instant::now();
-                for (i, b) in boxes.iter().enumerate() {
-                    bvh.insert_or_update_partially(*b, i as u32, 0.0);
-                }
-                bvh.refit(&mut workspace);
-                let mut peer_pairs = 0usize;
-                bvh.traverse_bvtt_single_tree::<false>(&mut workspace, &mut |a, b| {
-                    peer_pairs += usize::from(boxes[a as usize].intersects(&boxes[b as usize]));
-                });
-                let parry = t0.elapsed().as_secs_f64();
-                assert_eq!(peer_pairs, pairs, "parry3d-f64 finds other pairs");
-                if k > 1 {
-                    times.push(frcd);
-                    parry_times.push(parry);
-                }
+    let motions = std::env::var("FRCD_WORLD_MOTIONS").unwrap_or("wobble,drift,shuffle".into());
+    for motion in motions.split(',') {
+        for layout in ["cube", "along y"] {
+            if motion != "wobble" && layout != "cube" {
+                continue;
             }
-            let (m, mp) = (median(times.clone()), median(parry_times.clone()));
-            println!(
-                "world/broad {layout}: {n} bodies, {pairs} overlapping pairs, frcd {:.3} ms, parry3d-f64 Bvh {:.3} ms (parry / frcd {:.2}x), medians of {} coherent steps (load average {})",
-                m * 1e3,
-                mp * 1e3,
-                mp / m,
-                times.len(),
-                load()
-            );
-            n *= 4;
+            let mut n = 4096;
+            while n <= top {
+                bench_broad_scene(&cube, motion, layout, n);
+                n *= 4;
+            }
         }
     }
+}
+
+fn bench_broad_scene(cube: &Arc<ObbTree>, motion: &str, layout: &str, n: usize) {
+    let mut rng = Rng::new(n as u64 + layout.len() as u64);
+    // Unit boxes at density 4 / (4/3 π 2³) per unit volume: about 4 neighbours each.
+    let volume = n as f64 * (4.0 / 3.0 * std::f64::consts::PI * 8.0) / 4.0;
+    let extent = match layout {
+        "cube" => DVec3::splat(volume.cbrt()),
+        _ => {
+            let side = (volume / 400.0).sqrt();
+            DVec3::new(side, 400.0, side)
+        }
+    };
+    let place = |rng: &mut Rng| {
+        DVec3::new(
+            rng.range(0.0, extent.x),
+            rng.range(0.0, extent.y),
+            rng.range(0.0, extent.z),
+        )
+    };
+    let centres: Vec<DVec3> = (0..n).map(|_| place(&mut rng)).collect();
+    let velocities: Vec<DVec3> = (0..n)
+        .map(|_| {
+            let d = DVec3::new(
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+            );
+            d.normalize_or(DVec3::X) * rng.range(0.0, 0.02)
+        })
+        .collect();
+    let mut w = World::new(WorldOptions::default());
+    let ids: Vec<BodyId> = centres
+        .iter()
+        .map(|&c| {
+            w.add_body(cube.clone(), Pose::from_translation(c), false)
+                .expect("valid pose")
+        })
+        .collect();
+    let mut times = Vec::new();
+    let mut parry_times = [Vec::new(), Vec::new()];
+    let mut pairs = 0;
+    let mut bvh = [
+        parry3d_f64::partitioning::Bvh::new(),
+        parry3d_f64::partitioning::Bvh::new(),
+    ];
+    let mut workspace = parry3d_f64::partitioning::BvhWorkspace::default();
+    let start = w.broad_stats();
+    for k in 0..12 {
+        let t = k as f64 * 0.05;
+        let updates: Vec<(BodyId, Pose)> = ids
+            .iter()
+            .zip(&centres)
+            .enumerate()
+            .map(|(i, (&id, &c))| {
+                let at = match motion {
+                    "wobble" => {
+                        let phase = i as f64 * 0.37 + t;
+                        c + 0.05 * DVec3::new(phase.sin(), phase.cos(), (2.0 * phase).sin())
+                    }
+                    "drift" => c + velocities[i] * k as f64,
+                    _ => place(&mut rng),
+                };
+                (id, Pose::from_translation(at))
+            })
+            .collect();
+        w.set_poses(&updates).expect("valid poses");
+        let t0 = Instant::now();
+        pairs = black_box(w.overlapping_pairs(0.0)).len();
+        let frcd = t0.elapsed().as_secs_f64();
+        // The peer on the same boxes (converted outside the timing).
+        let boxes: Vec<parry3d_f64::bounding_volume::Aabb> = ids
+            .iter()
+            .map(|&id| {
+                let b = w.body_aabb(id).expect("live");
+                let v = |p: DVec3| parry3d_f64::math::Vector::new(p.x, p.y, p.z);
+                parry3d_f64::bounding_volume::Aabb::new(v(b.min), v(b.max))
+            })
+            .collect();
+        for (p, margin) in [0.0, 0.1].into_iter().enumerate() {
+            let t0 = Instant::now();
+            if motion == "shuffle" {
+                use parry3d_f64::bounding_volume::BoundingVolume;
+                // Every box moved far: a fresh build, as a user of parry would do here (its
+                // incremental updates took 8.5 s a step at 65,536 bodies).
+                let grown: Vec<_> = boxes.iter().map(|b| b.loosened(margin)).collect();
+                bvh[p] = parry3d_f64::partitioning::Bvh::from_leaves(
+                    parry3d_f64::partitioning::BvhBuildStrategy::Binned,
+                    &grown,
+                );
+            } else {
+                for (i, b) in boxes.iter().enumerate() {
+                    bvh[p].insert_or_update_partially(*b, i as u32, margin);
+                }
+                bvh[p].optimize_incremental(&mut workspace);
+                bvh[p].refit(&mut workspace);
+            }
+            let mut peer_pairs = 0usize;
+            bvh[p].traverse_bvtt_single_tree::<false>(&mut workspace, &mut |a, b| {
+                peer_pairs += usize::from(boxes[a as usize].intersects(&boxes[b as usize]));
+            });
+            let parry = t0.elapsed().as_secs_f64();
+            assert_eq!(peer_pairs, pairs, "parry3d-f64 finds other pairs");
+            if k > 1 {
+                parry_times[p].push(parry);
+            }
+        }
+        if k > 1 {
+            times.push(frcd);
+        }
+    }
+    let stats = w.broad_stats();
+    let (m, mp0, mp1) = (
+        median(times.clone()),
+        median(parry_times[0].clone()),
+        median(parry_times[1].clone()),
+    );
+    println!(
+        "world/broad {motion} {layout}: {n} bodies, {pairs} overlapping pairs, frcd {:.3} ms, parry3d-f64 Bvh {:.3} ms tight (parry / frcd {:.2}x), {:.3} ms grown by 0.1 ({:.2}x); frcd re-inserted {:.0} bodies and rebuilt {} times in 12 steps; medians of {} steps (load average {})",
+        m * 1e3,
+        mp0 * 1e3,
+        mp0 / m,
+        mp1 * 1e3,
+        mp1 / m,
+        (stats.reinserted - start.reinserted) as f64,
+        stats.rebuilds - start.rebuilds,
+        times.len(),
+        load()
+    );
 }
 
 fn bench_world(c: &mut Criterion) {

@@ -336,7 +336,11 @@ pub fn world_broad(data: &[u8]) {
             Pose::from_translation(c)
         }
     };
-    let mut w = World::new(WorldOptions::default());
+    // The broad phase's grown boxes: the default, tight, and as large as the boxes.
+    let mut w = World::new(WorldOptions {
+        box_slack_percent: [10, 0, 100][(flags >> 5) as usize % 3],
+        ..WorldOptions::default()
+    });
     let mut ids: Vec<BodyId> = Vec::new();
     for k in 0..n {
         let pose = place(&mut next);

@@ -14,8 +14,10 @@
 //!   whose separated pairs keep their margins against a bound on the motion (no test while the
 //!   margin holds), with a work budget that falls back to a fresh traversal; same answers as
 //!   [`collide`];
-//! - [`World`]: many bodies sharing `Arc<ObbTree>`s, incremental sweep-and-prune (a grid where
-//!   the boxes crowd a volume; [`overlapping_boxes`] on plain boxes) and a deterministic
+//! - [`World`]: many bodies sharing `Arc<ObbTree>`s, a broad phase that keeps its candidate
+//!   pairs over grown boxes and re-inserts only the bodies that leave them (a dynamic box tree;
+//!   sweep-and-prune or a grid when many move far; [`overlapping_boxes`] on plain boxes) and a
+//!   deterministic
 //!   (rayon-parallel with the default `parallel` feature) narrow phase;
 //! - [`oracle`]: the brute-force exact oracle every backend is compared with.
 //!
@@ -51,7 +53,7 @@ pub use query::{
 pub use saved::{LoadError, SavedTree};
 pub use tree::{BuildOptions, Node, ObbTree, SplitMethod};
 pub use world::{
-    Apart, BodyContact, BodyId, Clearance, ClearanceCache, ClearanceWork, SpinProfile, StepReport,
-    StepTiming, World, WorldError, WorldOptions, overlapping_boxes, pair_clearance,
+    Apart, BodyContact, BodyId, BroadStats, Clearance, ClearanceCache, ClearanceWork, SpinProfile,
+    StepReport, StepTiming, World, WorldError, WorldOptions, overlapping_boxes, pair_clearance,
     pair_clearance_apart, pair_clearance_cached, pair_clearance_spin,
 };

@@ -1,7 +1,9 @@
-//! Many bodies: generational handles, an incremental sweep-and-prune broad phase (a grid where
-//! the boxes crowd a volume), and a cached, deterministic, parallel narrow phase whose results
-//! are borrowed from the [`World`].
+//! Many bodies: generational handles, a broad phase that keeps its candidate pairs over grown
+//! boxes from step to step (a dynamic box tree for the bodies that leave them; sweep-and-prune,
+//! or a grid where the boxes crowd a volume, when many do), and a cached, deterministic,
+//! parallel narrow phase whose results are borrowed from the [`World`].
 
+mod boxtree;
 mod broad;
 mod clearance;
 
@@ -17,6 +19,7 @@ pub use handle::BodyId;
 use crate::query::{Collision, Containment, Counters, Mode, PairCache, Request, collide_cached};
 use crate::tree::ObbTree;
 use broad::BroadPhase;
+pub use broad::BroadStats;
 use frcd_geom::{Aabb, DVec3, Pose};
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -74,10 +77,12 @@ pub struct WorldOptions {
     pub request: Request,
     /// Keep a [`PairCache`] per body pair (temporal coherence).
     pub coherence: bool,
-    /// A full re-sort of the broad phase happens when an insertion sort would make more than
-    /// `resort_factor · n` swaps (incoherent motion). Teleported and added bodies are merged in
-    /// separately and never trigger it.
-    pub resort_factor: u32,
+    /// The broad phase keeps each body's box grown by this many percent of its largest side on
+    /// every side, and its candidate pairs from step to step: a body that moves within its
+    /// grown box costs the broad phase one exact box test per candidate pair and nothing else
+    /// (default 10). Larger: fewer re-insertions, more candidates to test; 0: tight boxes, every
+    /// move re-inserts the body. The answers do not depend on it.
+    pub box_slack_percent: u32,
 }
 
 impl Default for WorldOptions {
@@ -88,7 +93,7 @@ impl Default for WorldOptions {
                 ..Request::default()
             },
             coherence: true,
-            resort_factor: 8,
+            box_slack_percent: 10,
         }
     }
 }
@@ -146,10 +151,17 @@ pub(crate) struct Body {
     thresholds: Vec<(BodyId, f64)>,
 }
 
+/// A body slot: small (16 bytes), so that the broad phase's pass over the pairs reads the
+/// handles and the pair filter's flags from a compact array; the body itself is boxed.
 #[derive(Debug)]
 struct Slot {
     generation: u32,
-    body: Option<Body>,
+    /// The body is static (a copy of `Body::is_static`).
+    is_static: bool,
+    /// The body may have excluded partners (set by [`World::exclude_pair`], cleared when the
+    /// slot is reused): pairs of slots without it skip the exclusion lists.
+    may_exclude: bool,
+    body: Option<Box<Body>>,
 }
 
 #[derive(Debug)]
@@ -237,15 +249,14 @@ struct StepStats {
 ///
 /// - **Handles** carry a slot index, a generation and the world's serial: a handle of a removed
 ///   body, or of another world, is refused with a typed error, never silently aliased.
-/// - **Broad phase**: the bodies' world boxes, copied into one contiguous array each step,
-///   sorted along the axis their centres spread most (x, y or z; kept unless another spreads
-///   twice as much) and swept; where a sample of the sorted boxes shows the sweep would compare
-///   each box with more than 24 others (1,024 bodies or more filling a volume), a uniform grid
-///   finds the same pairs instead (65,536 boxes in a cube: 240 → 27 ms). The sort is an
-///   insertion sort on last step's order (near linear under coherent motion) with a guard that
-///   switches to a full sort when it would exceed `resort_factor · n` swaps. [`World::teleport`]
-///   is O(1): the teleported bodies are taken out and merged back in at the next step, in
-///   O(n + k log k) for k teleports, and only their own pair caches are dropped (lazily, by an
+/// - **Broad phase**: candidate pairs kept from step to step over grown boxes. Each body's box
+///   is kept grown by [`WorldOptions::box_slack_percent`] of its largest side; a step tests the
+///   candidates with the bodies' own boxes (so the answer is exact), and only the bodies that
+///   left their grown box since the last step (or were added or removed) are re-inserted, in a
+///   dynamic box tree, and queried for new candidates. When more than an eighth of the bodies
+///   leave at once (incoherent motion, a new margin), every candidate is found afresh by a sweep
+///   along the axis the centres spread most, or by a uniform grid where many bodies fill a
+///   volume. [`World::teleport`] drops only the teleported body's own pair caches (lazily, by an
 ///   epoch, without scanning the pairs).
 /// - **Narrow phase**: static-static and excluded pairs are never queried; pairs whose two poses
 ///   did not change since their last answer are answered from it. The other pairs run in
@@ -314,7 +325,7 @@ impl World {
             slots: Vec::new(),
             free: Vec::new(),
             live: 0,
-            broad: BroadPhase::default(),
+            broad: BroadPhase::new(f64::from(options.box_slack_percent) / 100.0),
             pairs: Vec::new(),
             spare: Vec::new(),
             contacts: Vec::new(),
@@ -373,6 +384,7 @@ impl World {
             Some(Slot {
                 generation,
                 body: Some(b),
+                ..
             }) if *generation == id.generation() => Ok(b),
             _ => Err(WorldError::UnknownBody { id }),
         }
@@ -382,13 +394,13 @@ impl World {
         self.get(id)?;
         Ok(self.slots[id.index() as usize]
             .body
-            .as_mut()
+            .as_deref_mut()
             .expect("checked above"))
     }
 
     /// Body in slot `i` (crate-internal; the slot must be live).
     pub(crate) fn slot_body(&self, i: u32) -> &Body {
-        self.slots[i as usize].body.as_ref().expect("live slot")
+        self.slots[i as usize].body.as_deref().expect("live slot")
     }
 
     fn handle(&self, i: u32) -> BodyId {
@@ -430,16 +442,19 @@ impl World {
             excluded: Vec::new(),
             thresholds: Vec::new(),
         };
+        let slot = Slot {
+            generation,
+            is_static,
+            may_exclude: false,
+            body: Some(Box::new(body)),
+        };
         if self.free.pop().is_some() {
-            self.slots[index as usize].body = Some(body);
+            self.slots[index as usize] = slot;
         } else {
-            self.slots.push(Slot {
-                generation,
-                body: Some(body),
-            });
+            self.slots.push(slot);
         }
         self.live += 1;
-        self.broad.insert(index);
+        self.broad.set(index, aabb);
         Ok(id)
     }
 
@@ -466,7 +481,7 @@ impl World {
             }
             self.forget_threshold(t);
         }
-        // The broad phase re-reads every slot at its next sort, so it drops the body then.
+        self.broad.remove(id.index());
         Ok(body.tree)
     }
 
@@ -483,12 +498,14 @@ impl World {
     fn move_body(&mut self, id: BodyId, pose: Pose) {
         let body = self.slots[id.index() as usize]
             .body
-            .as_mut()
+            .as_deref_mut()
             .expect("checked by the caller");
         if body.pose != pose {
             body.pose = pose;
             body.version += 1;
             body.aabb = world_box(&body.tree, &pose);
+            let aabb = body.aabb;
+            self.broad.set(id.index(), aabb);
         }
     }
 
@@ -507,14 +524,19 @@ impl World {
         Ok(())
     }
 
-    /// Moves a body far (incoherent motion) in O(1): it is merged back into the broad phase's
-    /// order at the next step, and the coherence caches of its pairs are dropped when next used.
+    /// Moves a body far (incoherent motion): like [`World::set_pose`], and the coherence caches
+    /// of its pairs are dropped when next used (lazily, by an epoch, without scanning the pairs).
     pub fn teleport(&mut self, id: BodyId, pose: Pose) -> Result<(), WorldError> {
         self.set_pose(id, pose)?;
         let body = self.get_mut(id)?;
         body.epoch = body.epoch.wrapping_add(1);
-        self.broad.reinsert(id.index());
         Ok(())
+    }
+
+    /// What the broad phase did since the world was made: rebuilds, re-inserted bodies, tree
+    /// builds (work counts for tests and benchmarks; they never change an answer).
+    pub fn broad_stats(&self) -> BroadStats {
+        self.broad.stats
     }
 
     /// The pose of a body.
@@ -539,6 +561,8 @@ impl World {
         }
         self.get_mut(a)?.excluded.push(b);
         self.get_mut(b)?.excluded.push(a);
+        self.slots[a.index() as usize].may_exclude = true;
+        self.slots[b.index() as usize].may_exclude = true;
         Ok(())
     }
 
@@ -648,21 +672,29 @@ impl World {
     /// `frcd-hybrid`): the tested body pairs whose world boxes, each grown by `margin / 2`,
     /// overlap — every pair closer than `margin` among them. Sorted by slot index, `a < b`.
     pub fn overlapping_pairs(&mut self, margin: f64) -> Vec<(BodyId, BodyId)> {
-        self.broad
-            .sort(&self.slots, self.options.resort_factor as usize);
         let mut raw = Vec::new();
-        self.broad.sweep(margin.max(0.0) * 0.5, &mut raw);
-        raw.sort_unstable();
-        raw.into_iter()
-            .map(|(i, j)| (self.handle(i), self.handle(j)))
-            .filter(|&(a, b)| self.pair_filter(a, b))
-            .collect()
+        self.broad.pairs(margin.max(0.0), &mut raw);
+        let mut out = Vec::with_capacity(raw.len());
+        for (k, &(i, j)) in raw.iter().enumerate() {
+            // The second slot of each pair is a random read: ask for it a few pairs ahead.
+            if let Some(&(_, ahead)) = raw.get(k + broad::PREFETCH_AHEAD) {
+                broad::prefetch(&self.slots[ahead as usize]);
+            }
+            let (a, b) = (self.handle(i), self.handle(j));
+            if self.pair_filter(a, b) {
+                out.push((a, b));
+            }
+        }
+        out
     }
 
     fn pair_filter(&self, a: BodyId, b: BodyId) -> bool {
-        let (ba, bb) = (self.slot_body(a.index()), self.slot_body(b.index()));
-        !(ba.is_static && bb.is_static)
-            && (ba.excluded.is_empty() && bb.excluded.is_empty() || !self.is_excluded(a, b))
+        let (sa, sb) = (
+            &self.slots[a.index() as usize],
+            &self.slots[b.index() as usize],
+        );
+        !(sa.is_static && sb.is_static)
+            && (!sa.may_exclude && !sb.may_exclude || !self.is_excluded(a, b))
     }
 
     /// Advances one step: broad phase, then the narrow phase on the candidate pairs whose poses
@@ -728,8 +760,8 @@ impl World {
         let options = self.options;
         let run = |e: &mut PairEntry| {
             let t = Instant::now();
-            let ba = slots[e.a.index() as usize].body.as_ref().expect("live");
-            let bb = slots[e.b.index() as usize].body.as_ref().expect("live");
+            let ba = slots[e.a.index() as usize].body.as_deref().expect("live");
+            let bb = slots[e.b.index() as usize].body.as_deref().expect("live");
             let st = &mut e.state;
             let versions = (ba.version, bb.version);
             let epochs = (ba.epoch, bb.epoch);

@@ -432,6 +432,87 @@ fn overlapping_pairs_of_a_crowded_volume_equal_all_pairs_of_boxes() {
     assert!(checked > 2000, "the volume is crowded: {checked} pairs");
 }
 
+/// The broad phase's kept candidates: each step a few bodies drift out of their grown boxes
+/// (re-inserted one by one), a few wobble inside them, one teleports, and bodies come and go
+/// (slots reused); some steps move most bodies (a fresh rebuild). Every step equals all pairs
+/// of boxes, with the slack at 0, 10 and 100 percent, and the counters show each path ran.
+#[test]
+fn kept_candidates_equal_all_pairs_through_drift_teleports_and_removals() {
+    let trees = [
+        cube(),
+        Arc::new(ObbTree::build(
+            &shapes::cuboid(DVec3::new(3.0, 0.3, 0.3)),
+            &BuildOptions::default(),
+        )),
+    ];
+    for slack in [0, 10, 100] {
+        let mut rng = StdRng::seed_from_u64(5 + slack as u64);
+        let mut w = World::new(WorldOptions {
+            box_slack_percent: slack,
+            ..WorldOptions::default()
+        });
+        let place = |rng: &mut StdRng| {
+            Pose::new(
+                DVec3::new(
+                    rng.random_range(0.0..30.0),
+                    rng.random_range(0.0..30.0),
+                    rng.random_range(0.0..30.0),
+                ),
+                DQuat::from_rotation_z(rng.random_range(0.0..3.0)),
+            )
+        };
+        let mut ids: Vec<_> = (0..600)
+            .map(|k| {
+                let p = place(&mut rng);
+                w.add_body(trees[usize::from(k % 9 == 0)].clone(), p, k % 41 == 0)
+                    .unwrap()
+            })
+            .collect();
+        let mut checked = 0;
+        for step in 0..30 {
+            let everyone = step % 10 == 9;
+            for (k, &id) in ids.iter().enumerate() {
+                let p = w.pose(id).unwrap();
+                let d = if everyone || k % 37 == step % 37 {
+                    // Out of the grown box (of the cubes, at least).
+                    DVec3::new(0.9, -0.4, 0.3) * (1.0 + 2.0 * f64::from(slack) / 100.0)
+                } else if k % 3 == 0 {
+                    // Inside it (at 10 %).
+                    DVec3::new(0.004, 0.0, -0.003) * (step % 2) as f64
+                } else {
+                    continue;
+                };
+                w.set_pose(id, Pose::new(p.translation + d, p.rotation))
+                    .unwrap();
+            }
+            let k = rng.random_range(0..ids.len());
+            w.teleport(ids[k], place(&mut rng)).unwrap();
+            if step % 3 == 1 {
+                let gone = ids.swap_remove(rng.random_range(0..ids.len()));
+                w.remove_body(gone).unwrap();
+                let p = place(&mut rng);
+                ids.push(w.add_body(trees[step % 2].clone(), p, false).unwrap());
+            }
+            let margin = if step < 20 { 0.0 } else { 0.4 };
+            let got = w.overlapping_pairs(margin);
+            let want = all_pairs_within(&w, margin);
+            assert_eq!(got, want, "slack {slack} %, step {step}");
+            checked += want.len();
+        }
+        let stats = w.broad_stats();
+        assert!(checked > 1000, "the scene overlaps: {checked} pairs");
+        assert!(stats.reinserted > 200, "slack {slack} %: {stats:?}");
+        assert!(stats.tree_builds >= 1, "slack {slack} %: {stats:?}");
+        // Grown boxes: the first step, the margin change and the three steps that move
+        // everyone. Tight boxes: also every step where a third of the bodies wobble.
+        let rebuilds = if slack == 0 { 10..=20 } else { 4..=6 };
+        assert!(
+            rebuilds.contains(&stats.rebuilds),
+            "slack {slack} %: {stats:?}"
+        );
+    }
+}
+
 /// `overlapping_boxes` against all pairs: boxes of mixed sizes (a few long ones) filling a
 /// cube (the grid) and strung along z (the sweep), with and without a margin.
 #[test]

@@ -1,8 +1,8 @@
-//! The broad phase: sweep and prune over the bodies' world boxes, along the axis their centres
-//! spread most, on a contiguous copy of the boxes.
+//! The broad phase: candidate pairs of grown boxes kept from step to step, found afresh by sweep
+//! and prune (or a uniform grid) when many bodies move far.
 
-use super::Slot;
-use frcd_geom::Aabb;
+use super::boxtree::{BoxTree, within};
+use frcd_geom::{Aabb, DVec3};
 
 /// A body's box as the sweep reads it: its extent along the sweep axis, then the other two
 /// axes' bounds, and its slot.
@@ -35,124 +35,346 @@ impl Swept {
     }
 }
 
-/// The bodies' boxes sorted along the sweep axis, maintained incrementally.
+/// The broad phase of a [`World`](crate::World): candidate pairs kept from step to step over
+/// grown ("fat") boxes.
 ///
-/// Why a copy: the sweep compares each box with every box that shares its range along the
-/// axis, and reading those through the world's slots (a `Body` each, a few hundred bytes
-/// apart) cost a cache miss per comparison. 65,536 unit boxes in a cube took 225 ms per step
-/// that way; see `benches/benches/world.rs` (`world/broad`) for the figures now.
+/// Each body's box is kept grown by `slack` times its largest side, and the pairs of fat boxes
+/// within the margin are the candidates. A step filters the candidates with the bodies' own
+/// boxes (the exact test, so the answer is every pair within the margin, and only those: a fat
+/// box holds its body's box, and the test is monotone in the boxes). Only a body that leaves
+/// its fat box (or is added or removed) changes the candidates: it is re-inserted in a dynamic
+/// [`BoxTree`] and queried against it. When more than an eighth of the bodies leave in one
+/// step (incoherent motion, a new margin, the first step), every fat box is re-grown and the
+/// candidates are found afresh by a sweep along the centres' widest axis, or by a uniform grid
+/// where that sweep would be long ([`box_pairs`]).
+///
+/// Why: re-finding every pair each step cost 27 ms for 65,536 unit boxes in a cube (a grid
+/// over all of them) and parry3d-f64's incremental BVH, re-fitted every step, 19 ms; see
+/// `benches/benches/world.rs` (`world/broad`) for the figures now.
 #[derive(Debug, Default)]
 pub(super) struct BroadPhase {
-    /// Sorted at the end of [`BroadPhase::sort`] (live slots only).
-    swept: Vec<Swept>,
-    /// Slots added or teleported since the last sort, merged in by the next one.
-    pending: Vec<u32>,
-    /// The sweep axis (0 = x, 1 = y, 2 = z).
-    axis: usize,
-    /// Scratch: membership of `pending`, by slot.
-    mark: Vec<bool>,
-    /// Scratch: the boxes of the last order's live slots, then of the pending ones.
-    boxes: Vec<(Aabb, u32)>,
+    /// By slot: the body's box (valid where `live`).
+    tight: Vec<Aabb>,
+    /// By slot: a body is there.
+    live: Vec<bool>,
+    /// Live slots.
+    count: usize,
+    /// By slot: the grown box the candidates were found with (valid where `indexed`).
+    fat: Vec<Aabb>,
+    /// By slot: the slot's fat box is among the candidates' (and in the tree, once built).
+    indexed: Vec<bool>,
+    /// Slots set or removed since the last update, each once (`touched_mark`).
+    touched: Vec<u32>,
+    touched_mark: Vec<bool>,
+    /// Every pair of indexed slots whose fat boxes are within `margin`, `(lo, hi)`, sorted.
+    candidates: Vec<(u32, u32)>,
+    /// The margin the candidates hold for (its bits); `None` before the first update.
+    margin: Option<u64>,
+    /// Relative growth of the fat boxes.
+    slack: f64,
+    /// The index of the fat boxes, built at the first step that needs it after a rebuild.
+    tree: BoxTree,
+    tree_built: bool,
+    /// Scratch.
+    changed: Vec<bool>,
+    escaped: Vec<u32>,
+    gone: Vec<u32>,
+    stack: Vec<u32>,
+    found: Vec<(u32, u32)>,
+    /// Work counters since the world was made.
+    pub(super) stats: BroadStats,
 }
 
-/// A new axis is taken only when the centres spread this many times more along it (by
-/// variance) than along the current one: a scene near the tie does not re-sort every step.
-const AXIS_SWITCH: f64 = 2.0;
+/// What the broad phase of a [`World`](crate::World) did since the world was made
+/// ([`World::broad_stats`](crate::World::broad_stats)).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BroadStats {
+    /// Updates that found every candidate pair afresh (the first, a new margin, or more than
+    /// an eighth of the bodies out of their grown boxes).
+    pub rebuilds: u64,
+    /// Bodies re-inserted one by one (out of their grown box, added, or removed).
+    pub reinserted: u64,
+    /// Builds of the dynamic tree those are re-inserted in.
+    pub tree_builds: u64,
+}
+
+/// More than `1 / REBUILD_FRACTION` of the bodies changed in one step: find every pair afresh.
+const REBUILD_FRACTION: usize = 8;
 
 impl BroadPhase {
-    /// A new body in slot `i`.
-    pub(super) fn insert(&mut self, i: u32) {
-        self.pending.push(i);
+    /// A broad phase whose fat boxes are grown by `slack` times their largest side (negative or
+    /// NaN: 0, tight boxes).
+    pub(super) fn new(slack: f64) -> Self {
+        Self {
+            slack: if slack > 0.0 { slack } else { 0.0 },
+            ..Self::default()
+        }
     }
 
-    /// A teleported body: taken out of the order and merged back at the next sort (O(1) now).
-    pub(super) fn reinsert(&mut self, i: u32) {
-        self.pending.push(i);
+    fn touch(&mut self, i: u32) {
+        let i = i as usize;
+        if self.touched_mark.len() <= i {
+            let n = (i + 1).max(2 * self.touched_mark.len());
+            self.touched_mark.resize(n, false);
+            self.tight.resize(n, Aabb::EMPTY);
+            self.live.resize(n, false);
+            self.fat.resize(n, Aabb::EMPTY);
+            self.indexed.resize(n, false);
+            self.changed.resize(n, false);
+        }
+        if !self.touched_mark[i] {
+            self.touched_mark[i] = true;
+            self.touched.push(i as u32);
+        }
     }
 
-    /// Re-reads every box and sorts them along the sweep axis: removed and pending slots are
-    /// taken out (O(n)), the axis is re-chosen (the centres' largest variance, with
-    /// hysteresis), the rest is insertion-sorted (near linear under coherent motion; a full
-    /// sort when it would take more than `resort_factor · n` swaps or the axis changed), and the
-    /// pending slots are sorted and merged in (O(n + k log k)).
-    pub(super) fn sort(&mut self, slots: &[Slot], resort_factor: usize) {
-        let aabb = |i: u32| slots[i as usize].body.as_ref().map(|b| b.aabb);
-        self.mark.clear();
-        self.mark.resize(slots.len(), false);
-        let mut pending = std::mem::take(&mut self.pending);
-        pending.sort_unstable();
-        pending.dedup();
-        for &i in &pending {
-            self.mark[i as usize] = true;
+    /// Slot `i` holds a body with box `b` (added or moved).
+    pub(super) fn set(&mut self, i: u32, b: Aabb) {
+        self.touch(i);
+        let i = i as usize;
+        if !self.live[i] {
+            self.live[i] = true;
+            self.count += 1;
         }
-        // One pass over the slots in the last order (the only scattered reads of a step).
-        self.boxes.clear();
-        for s in &self.swept {
-            if self.mark[s.slot as usize] {
-                continue;
+        self.tight[i] = b;
+    }
+
+    /// Slot `i`'s body is gone.
+    pub(super) fn remove(&mut self, i: u32) {
+        self.touch(i);
+        let i = i as usize;
+        if self.live[i] {
+            self.live[i] = false;
+            self.count -= 1;
+        }
+    }
+
+    /// The fat box of `b`.
+    fn fatten(&self, b: &Aabb) -> Aabb {
+        let side = (b.max - b.min).max_element();
+        let d = self.slack * side;
+        // Inverted or non-finite boxes get no growth (and fail `holds`, so they are re-inserted
+        // whenever they move).
+        b.inflated(if d.is_finite() && d > 0.0 { d } else { 0.0 })
+    }
+
+    /// Pushes the `(lo, hi)` slot pairs whose boxes are within `margin` (`>= 0`) of each
+    /// other on every axis, sorted.
+    pub(super) fn pairs(&mut self, margin: f64, out: &mut Vec<(u32, u32)>) {
+        self.update(margin + 0.0);
+        let t = &self.tight;
+        let c = &self.candidates;
+        out.reserve(c.len() / 2);
+        for (k, &(a, b)) in c.iter().enumerate() {
+            // The second box of each pair is a random read: ask for it a few pairs ahead.
+            if let Some(&(_, ahead)) = c.get(k + PREFETCH_AHEAD) {
+                prefetch(&t[ahead as usize]);
             }
-            if let Some(b) = aabb(s.slot) {
-                self.boxes.push((b, s.slot));
+            if within(&t[a as usize], &t[b as usize], margin) {
+                out.push((a, b));
             }
         }
-        let kept = self.boxes.len();
-        for &i in &pending {
-            if let Some(b) = aabb(i) {
-                self.boxes.push((b, i));
-            }
+    }
+
+    /// Brings the candidates up to date with the touched slots.
+    fn update(&mut self, margin: f64) {
+        if self.margin != Some(margin.to_bits()) {
+            return self.rebuild(margin);
         }
-        let old_axis = self.axis;
-        self.axis = sweep_axis(&self.boxes, self.axis);
-        let axis = self.axis;
-        self.swept.clear();
-        self.swept.extend(
-            self.boxes[..kept]
-                .iter()
-                .map(|(b, i)| Swept::new(b, *i, axis)),
-        );
-        let limit = resort_factor.saturating_mul(self.swept.len().max(1));
-        if axis != old_axis || !insertion_sort(&mut self.swept, limit) {
-            self.swept.sort_unstable_by(Swept::cmp);
-        }
-        if kept < self.boxes.len() {
-            let mut p: Vec<Swept> = self.boxes[kept..]
-                .iter()
-                .map(|(b, i)| Swept::new(b, *i, axis))
-                .collect();
-            p.sort_unstable_by(Swept::cmp);
-            let old = std::mem::take(&mut self.swept);
-            let mut merged = Vec::with_capacity(old.len() + p.len());
-            let (mut x, mut y) = (0, 0);
-            while x < old.len() && y < p.len() {
-                if old[x].cmp(&p[y]).is_le() {
-                    merged.push(old[x]);
-                    x += 1;
-                } else {
-                    merged.push(p[y]);
-                    y += 1;
+        self.escaped.clear();
+        self.gone.clear();
+        for &s in &self.touched {
+            let i = s as usize;
+            self.touched_mark[i] = false;
+            if !self.live[i] {
+                if self.indexed[i] {
+                    self.gone.push(s);
                 }
+            } else if !self.indexed[i] || !holds(&self.fat[i], &self.tight[i]) {
+                self.escaped.push(s);
             }
-            merged.extend_from_slice(&old[x..]);
-            merged.extend_from_slice(&p[y..]);
-            self.swept = merged;
         }
-        pending.clear();
-        self.pending = pending;
-    }
-
-    /// Pushes `(lo, hi)` slot pairs whose boxes, each grown by `half_margin`, overlap, as of the
-    /// last [`BroadPhase::sort`]. Sweeps the sorted array, unless a sample says the sweep would
-    /// compare each box with more than [`GRID_FROM`] others (bodies filling a volume: a box
-    /// shares its range along any one axis with about n^(2/3) others); then a uniform grid.
-    pub(super) fn sweep(&self, half_margin: f64, out: &mut Vec<(u32, u32)>) {
-        let margin = 2.0 * half_margin;
-        let s = &self.swept;
-        if s.len() >= GRID_MIN_BODIES
-            && sampled_sweep_length(s, margin) > GRID_FROM
-            && grid_pairs(s, margin, out)
-        {
+        self.touched.clear();
+        let k = self.escaped.len() + self.gone.len();
+        if k == 0 {
             return;
         }
+        if k > self.count / REBUILD_FRACTION {
+            return self.rebuild(margin);
+        }
+        for &s in self.escaped.iter().chain(&self.gone) {
+            self.changed[s as usize] = true;
+        }
+        let rebuild_tree = !self.tree_built || self.tree.edits > self.tree.leaves.max(1024);
+        if rebuild_tree {
+            // The unchanged indexed slots (the changed ones are inserted below).
+            let mut items: Vec<(Aabb, u32)> = (0..self.indexed.len())
+                .filter(|&i| self.indexed[i] && !self.changed[i])
+                .map(|i| (self.fat[i], i as u32))
+                .collect();
+            self.tree.build(&mut items, self.indexed.len());
+            self.tree_built = true;
+            self.stats.tree_builds += 1;
+        } else {
+            for &s in &self.gone {
+                self.tree.remove(s);
+            }
+        }
+        for &s in &self.gone {
+            self.indexed[s as usize] = false;
+        }
+        // In space-filling-curve order, so that consecutive insertions and queries walk the
+        // same upper nodes while they are in the cache.
+        sort_along_curve(&mut self.escaped, &self.tight);
+        for k in 0..self.escaped.len() {
+            let s = self.escaped[k];
+            let i = s as usize;
+            let fat = self.fatten(&self.tight[i]);
+            self.fat[i] = fat;
+            // A leaf whose new box its near ancestors (almost) hold moves in place.
+            if rebuild_tree || !self.indexed[i] || !self.tree.move_in_place(s, fat) {
+                if self.indexed[i] && !rebuild_tree {
+                    self.tree.remove(s);
+                }
+                self.tree.insert(s, fat);
+            }
+            self.indexed[i] = true;
+        }
+        self.stats.reinserted += k as u64;
+        let changed = &self.changed;
+        self.candidates
+            .retain(|&(a, b)| !changed[a as usize] && !changed[b as usize]);
+        self.found.clear();
+        for &e in &self.escaped {
+            let found = &mut self.found;
+            self.tree
+                .query(&self.fat[e as usize], margin, &mut self.stack, |o| {
+                    // A pair of two re-inserted slots is taken from the lower one's query.
+                    if o != e && (!changed[o as usize] || e < o) {
+                        found.push((e.min(o), e.max(o)));
+                    }
+                });
+        }
+        for &s in self.escaped.iter().chain(&self.gone) {
+            self.changed[s as usize] = false;
+        }
+        if !self.found.is_empty() {
+            self.found.sort_unstable();
+            let old = std::mem::take(&mut self.candidates);
+            self.candidates = merge_sorted(&old, &self.found);
+        }
+    }
+
+    /// Re-grows every fat box and finds every candidate afresh.
+    fn rebuild(&mut self, margin: f64) {
+        for &s in &self.touched {
+            self.touched_mark[s as usize] = false;
+        }
+        self.touched.clear();
+        let mut items = Vec::with_capacity(self.count);
+        for i in 0..self.live.len() {
+            self.indexed[i] = self.live[i];
+            if self.live[i] {
+                self.fat[i] = self.fatten(&self.tight[i]);
+                items.push((self.fat[i], i as u32));
+            }
+        }
+        self.candidates = box_pairs(&items, margin);
+        self.margin = Some(margin.to_bits());
+        self.tree_built = false;
+        self.stats.rebuilds += 1;
+    }
+}
+
+/// Sorts `slots` by the Morton code of their boxes' centres in the bounds of those centres
+/// (non-finite centres last).
+fn sort_along_curve(slots: &mut [u32], boxes: &[Aabb]) {
+    let centre = |s: u32| boxes[s as usize].center();
+    let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    for &s in slots.iter() {
+        let c = centre(s);
+        if c.is_finite() {
+            lo = lo.min(c);
+            hi = hi.max(c);
+        }
+    }
+    let scale = DVec3::splat(1023.0) / (hi - lo).max(DVec3::splat(f64::MIN_POSITIVE));
+    // Ten bits per axis: a cell per about a thousandth of the spread is fine enough to order
+    // queries of boxes that are small next to it.
+    let spread = |x: u32| {
+        let mut x = x & 0x3ff;
+        x = (x | (x << 16)) & 0x0300_00ff;
+        x = (x | (x << 8)) & 0x0300_f00f;
+        x = (x | (x << 4)) & 0x030c_30c3;
+        (x | (x << 2)) & 0x0924_9249
+    };
+    let key = |s: u32| {
+        let c = centre(s);
+        if !c.is_finite() {
+            return u32::MAX;
+        }
+        // `as` saturates (and maps NaN to 0): never out of range.
+        let q = ((c - lo) * scale).to_array().map(|v| v as u32);
+        spread(q[0]) | (spread(q[1]) << 1) | (spread(q[2]) << 2)
+    };
+    slots.sort_unstable_by_key(|&s| (key(s), s));
+}
+
+/// Candidate pairs between a prefetch of a box and its test.
+pub(super) const PREFETCH_AHEAD: usize = 16;
+
+/// A hint to bring `x` into the cache (nothing where the target has no such instruction).
+#[inline(always)]
+pub(super) fn prefetch<T>(x: &T) {
+    #[cfg(target_arch = "x86_64")]
+    #[allow(unsafe_code)]
+    // SAFETY: a prefetch never faults and has no effect on memory; SSE is part of x86_64.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
+            (x as *const T).cast(),
+        );
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = x;
+}
+
+/// Whether `fat` holds `b` (false for NaN bounds).
+fn holds(fat: &Aabb, b: &Aabb) -> bool {
+    fat.min.cmple(b.min).all() && b.max.cmple(fat.max).all()
+}
+
+/// Two sorted lists merged (duplicates kept).
+fn merge_sorted(a: &[(u32, u32)], b: &[(u32, u32)]) -> Vec<(u32, u32)> {
+    let mut out = Vec::with_capacity(a.len() + b.len());
+    let (mut x, mut y) = (0, 0);
+    while x < a.len() && y < b.len() {
+        if a[x] <= b[y] {
+            out.push(a[x]);
+            x += 1;
+        } else {
+            out.push(b[y]);
+            y += 1;
+        }
+    }
+    out.extend_from_slice(&a[x..]);
+    out.extend_from_slice(&b[y..]);
+    out
+}
+
+/// Every pair of `boxes` (`(box, id)`) within `margin` on every axis, as `(lower id, higher
+/// id)`, sorted: a sweep along the centres' widest axis, or a uniform grid where a sample
+/// shows the sweep would compare each box with more than [`GRID_FROM`] others (bodies filling
+/// a volume: a box shares its range along any one axis with about n^(2/3) others).
+fn box_pairs(boxes: &[(Aabb, u32)], margin: f64) -> Vec<(u32, u32)> {
+    let var = frcd_geom::centre_variance(boxes.iter().map(|(b, _)| b));
+    let axis = (1..3).fold(0, |best, a| if var[a] > var[best] { a } else { best });
+    let mut s: Vec<Swept> = boxes.iter().map(|(b, i)| Swept::new(b, *i, axis)).collect();
+    s.sort_unstable_by(Swept::cmp);
+    let mut out = Vec::new();
+    if !(s.len() >= GRID_MIN_BODIES
+        && sampled_sweep_length(&s, margin) > GRID_FROM
+        && grid_pairs(&s, margin, &mut out))
+    {
         for (p, bi) in s.iter().enumerate() {
             for bj in &s[p + 1..] {
                 if bj.lo - bi.hi > margin {
@@ -165,6 +387,8 @@ impl BroadPhase {
             }
         }
     }
+    out.sort_unstable();
+    out
 }
 
 /// Boxes the sweep may compare each box with, on average, before the grid takes over.
@@ -200,14 +424,14 @@ fn sampled_sweep_length(s: &[Swept], margin: f64) -> f64 {
 
 /// Whether two boxes are within `margin` of each other on every axis: the sweep's test,
 /// written the same way so that both paths give the same pairs to the last bit.
-fn within(a: &Swept, b: &Swept, margin: f64) -> bool {
+fn within_swept(a: &Swept, b: &Swept, margin: f64) -> bool {
     !(b.lo - a.hi > margin || a.lo - b.hi > margin || apart_across(a, b, margin))
 }
 
 /// The overlapping pairs through a uniform grid. Each box covers the cells of
 /// `[lower, upper + margin]` on every axis (the upper bound rounded outward, so a box covers
-/// every point `x` with `x - upper <= margin` as [`within`] computes it); the entries are sorted
-/// by cell, and a pair that passes [`within`] is reported in the one cell holding the largest of
+/// every point `x` with `x - upper <= margin` as [`within_swept`] computes it); the entries are
+/// sorted by cell, and a pair that passes [`within_swept`] is reported in the one cell holding the largest of
 /// its lower corners (both boxes cover that point, so the pair is found there and only there).
 /// Cells are twice the median box's largest covered side; a box covering more than
 /// [`GRID_SPAN`] cells along an axis is tested against every other box instead. False (nothing
@@ -264,7 +488,7 @@ fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
         )
     };
     // Long boxes, and inverted ones (`min > max`, which `overlapping_boxes` may be given and
-    // `within` still pairs), go to the all-pairs list.
+    // `within_swept` still pairs), go to the all-pairs list.
     let listed =
         |c0: [u64; 3], c1: [u64; 3]| (0..3).any(|k| c1[k] < c0[k] || c1[k] - c0[k] >= GRID_SPAN);
     let mut big: Vec<u32> = Vec::new();
@@ -304,7 +528,7 @@ fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
             let bi = &s[i as usize];
             for &(_, j) in &run[x + 1..] {
                 let bj = &s[j as usize];
-                if !within(bi, bj, margin) {
+                if !within_swept(bi, bj, margin) {
                     continue;
                 }
                 let corner = [
@@ -327,7 +551,7 @@ fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
             if j == b as usize || other_big.is_ok_and(|y| y < x) {
                 continue;
             }
-            if within(bi, bj, margin) {
+            if within_swept(bi, bj, margin) {
                 out.push((bi.slot.min(bj.slot), bi.slot.max(bj.slot)));
             }
         }
@@ -360,48 +584,5 @@ pub fn overlapping_boxes(boxes: &[Aabb], margin: f64) -> Vec<(u32, u32)> {
         .enumerate()
         .map(|(i, b)| (*b, i as u32))
         .collect();
-    let axis = sweep_axis(&tagged, 0);
-    let mut swept: Vec<Swept> = tagged
-        .iter()
-        .map(|(b, i)| Swept::new(b, *i, axis))
-        .collect();
-    swept.sort_unstable_by(Swept::cmp);
-    let phase = BroadPhase {
-        swept,
-        axis,
-        ..BroadPhase::default()
-    };
-    let mut out = Vec::new();
-    phase.sweep(margin.max(0.0) * 0.5, &mut out);
-    out.sort_unstable();
-    out
-}
-
-/// Insertion sort by [`Swept::cmp`]; false (order unspecified) once it exceeds `limit` swaps.
-fn insertion_sort(v: &mut [Swept], limit: usize) -> bool {
-    let mut swaps = 0usize;
-    for i in 1..v.len() {
-        let mut j = i;
-        while j > 0 && v[j - 1].cmp(&v[j]).is_gt() {
-            v.swap(j - 1, j);
-            j -= 1;
-            swaps += 1;
-            if swaps > limit {
-                return false;
-            }
-        }
-    }
-    true
-}
-
-/// The axis along which the box centres spread most (by variance), keeping `current` unless
-/// another spreads [`AXIS_SWITCH`] times more. Non-finite boxes are skipped.
-fn sweep_axis(boxes: &[(Aabb, u32)], current: usize) -> usize {
-    let var = frcd_geom::centre_variance(boxes.iter().map(|(b, _)| b));
-    let best = (1..3).fold(0, |best, a| if var[a] > var[best] { a } else { best });
-    if var[best] > AXIS_SWITCH * var[current] {
-        best
-    } else {
-        current
-    }
+    box_pairs(&tagged, margin.max(0.0))
 }
