@@ -45,7 +45,7 @@ impl Default for PairState {
 }
 
 /// Frame-to-frame state owned by the caller: the broad phase (an [`frcd_obb::World`] holding
-/// the checker's bodies: its sort order and re-sort guard), per-pair coherence caches and last
+/// the checker's bodies: its grown boxes and kept candidate pairs), per-pair coherence caches and last
 /// answers, GPU scratch buffers. One per checker and thread of control: a state used with one
 /// [`crate::Checker`] is refused by another ([`crate::HybridError::ForeignState`]) until
 /// [`FrameState::reset`].

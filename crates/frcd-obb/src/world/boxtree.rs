@@ -422,6 +422,52 @@ mod tests {
         assert!(t.root.is_none());
     }
 
+    /// A tree grown from nothing by insertions (pairings with leaves and, for a few large
+    /// boxes, with whole subtrees), emptied again and re-grown, against brute force.
+    #[test]
+    fn a_tree_grown_by_insertions_matches_brute_force() {
+        let mut t = BoxTree::default();
+        let mut boxes: Vec<Option<Aabb>> = vec![None; 400];
+        let mut stack = Vec::new();
+        for round in 0..2 {
+            for i in 0..400u32 {
+                let f = (i + round * 7) as f64;
+                let b = if i % 50 == 7 {
+                    Aabb::new(DVec3::splat(-1.0), DVec3::new(30.0, 2.0, 3.0))
+                } else {
+                    unit((f * 4.1) % 29.0, (f * 2.7) % 13.0, (f * 0.9) % 7.0)
+                };
+                t.insert(i, b);
+                boxes[i as usize] = Some(b);
+                if i % 5 == 3 {
+                    t.remove(i - 2);
+                    boxes[i as usize - 2] = None;
+                }
+                if i % 97 == 0 {
+                    t.check();
+                }
+            }
+            t.check();
+            for q in 0..30 {
+                let f = q as f64;
+                let qb = unit((f * 3.3) % 29.0, (f * 1.9) % 13.0, (f * 0.7) % 7.0);
+                let mut got = Vec::new();
+                t.query(&qb, 0.2, &mut stack, |s| got.push(s));
+                got.sort_unstable();
+                let want: Vec<u32> = (0..400u32)
+                    .filter(|&i| boxes[i as usize].is_some_and(|b| within(&b, &qb, 0.2)))
+                    .collect();
+                assert_eq!(got, want, "round {round}, query {q}");
+            }
+            for i in 0..400u32 {
+                t.remove(i);
+                boxes[i as usize] = None;
+            }
+            assert_eq!(t.check(), 0);
+            assert!(t.root.is_none());
+        }
+    }
+
     /// Non-finite boxes are placed and found without a panic or an endless descent.
     #[test]
     fn non_finite_boxes_do_not_panic() {
