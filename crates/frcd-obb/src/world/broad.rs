@@ -79,7 +79,8 @@ pub(super) struct BroadPhase {
     changed: Vec<bool>,
     escaped: Vec<u32>,
     gone: Vec<u32>,
-    stack: Vec<u32>,
+    stacks: Vec<Vec<u32>>,
+    query_boxes: Vec<Aabb>,
     found: Vec<(u32, u32)>,
     /// Work counters since the world was made.
     pub(super) stats: BroadStats,
@@ -248,16 +249,18 @@ impl BroadPhase {
         self.candidates
             .retain(|&(a, b)| !changed[a as usize] && !changed[b as usize]);
         self.found.clear();
-        for &e in &self.escaped {
-            let found = &mut self.found;
-            self.tree
-                .query(&self.fat[e as usize], margin, &mut self.stack, |o| {
-                    // A pair of two re-inserted slots is taken from the lower one's query.
-                    if o != e && (!changed[o as usize] || e < o) {
-                        found.push((e.min(o), e.max(o)));
-                    }
-                });
-        }
+        self.query_boxes.clear();
+        self.query_boxes
+            .extend(self.escaped.iter().map(|&e| self.fat[e as usize]));
+        let (found, escaped) = (&mut self.found, &self.escaped);
+        self.tree
+            .query_many(&self.query_boxes, margin, &mut self.stacks, |q, o| {
+                let e = escaped[q];
+                // A pair of two re-inserted slots is taken from the lower one's query.
+                if o != e && (!changed[o as usize] || e < o) {
+                    found.push((e.min(o), e.max(o)));
+                }
+            });
         for &s in self.escaped.iter().chain(&self.gone) {
             self.changed[s as usize] = false;
         }
