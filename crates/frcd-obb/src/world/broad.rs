@@ -533,7 +533,19 @@ fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
     let mut start = 0;
     while start < entries.len() {
         let k = entries[start].0;
-        let end = start + entries[start..].partition_point(|e| e.0 == k);
+        // A cell holds a few boxes: a linear scan for its end (a binary search over the rest
+        // of the entries was 15 % of a rebuild at 262,144 boxes).
+        let mut end = start + 1;
+        while end < entries.len() && entries[end].0 == k {
+            end += 1;
+        }
+        // The boxes are read in cell order, not in their own: ask for them a few cells ahead.
+        for &(_, ahead) in entries
+            .get(end + PREFETCH_AHEAD..end + PREFETCH_AHEAD + 4)
+            .unwrap_or(&[])
+        {
+            prefetch(&s[ahead as usize]);
+        }
         let run = &entries[start..end];
         for (x, &(_, i)) in run.iter().enumerate() {
             let bi = &s[i as usize];
