@@ -53,7 +53,8 @@ pub use query::{
 pub use saved::{LoadError, SavedTree};
 pub use tree::{BuildOptions, Node, ObbTree, SplitMethod};
 pub use world::{
-    Apart, BodyContact, BodyId, BroadStats, Clearance, ClearanceCache, ClearanceWork, SpinProfile,
-    StepReport, StepTiming, World, WorldError, WorldOptions, overlapping_boxes, pair_clearance,
-    pair_clearance_apart, pair_clearance_cached, pair_clearance_spin,
+    Apart, BodyContact, BodyId, BroadStats, Clearance, ClearanceCache, ClearanceWork,
+    MAX_BOX_SLACK_PERCENT, SpinProfile, StepReport, StepTiming, World, WorldError, WorldOptions,
+    overlapping_boxes, pair_clearance, pair_clearance_apart, pair_clearance_cached,
+    pair_clearance_spin,
 };

@@ -69,6 +69,9 @@ pub enum WorldError {
     },
 }
 
+/// The largest [`WorldOptions::box_slack_percent`] that takes effect.
+pub const MAX_BOX_SLACK_PERCENT: u32 = 100;
+
 /// Options of a [`World`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -81,7 +84,9 @@ pub struct WorldOptions {
     /// every side, and its candidate pairs from step to step: a body that moves within its
     /// grown box costs the broad phase one exact box test per candidate pair and nothing else
     /// (default 10). Larger: fewer re-insertions, more candidates to test; 0: tight boxes, every
-    /// move re-inserts the body. The answers do not depend on it.
+    /// move re-inserts the body. The answers do not depend on it. At most
+    /// [`MAX_BOX_SLACK_PERCENT`]: larger values act as that (the kept candidates grow with the
+    /// grown boxes' overlaps, so a huge slack would hold about every pair of bodies).
     pub box_slack_percent: u32,
 }
 
@@ -325,7 +330,9 @@ impl World {
             slots: Vec::new(),
             free: Vec::new(),
             live: 0,
-            broad: BroadPhase::new(f64::from(options.box_slack_percent) / 100.0),
+            broad: BroadPhase::new(
+                f64::from(options.box_slack_percent.min(MAX_BOX_SLACK_PERCENT)) / 100.0,
+            ),
             pairs: Vec::new(),
             spare: Vec::new(),
             contacts: Vec::new(),

@@ -513,6 +513,50 @@ fn kept_candidates_equal_all_pairs_through_drift_teleports_and_removals() {
     }
 }
 
+/// A slack beyond `MAX_BOX_SLACK_PERCENT` acts as that maximum: the same pairs and the same
+/// broad-phase work as at the maximum (without the cap, grown boxes as large as the scene would
+/// keep about every pair of bodies as a candidate).
+#[test]
+fn a_huge_slack_acts_as_the_maximum() {
+    let make = |slack| {
+        World::new(WorldOptions {
+            box_slack_percent: slack,
+            ..WorldOptions::default()
+        })
+    };
+    let (mut capped, mut huge) = (make(frcd_obb::MAX_BOX_SLACK_PERCENT), make(u32::MAX));
+    let mut rng = StdRng::seed_from_u64(9);
+    let mut ids = Vec::new();
+    for _ in 0..200 {
+        let p = random_pose(&mut rng, 12.0);
+        ids.push((
+            capped.add_body(cube(), p, false).unwrap(),
+            huge.add_body(cube(), p, false).unwrap(),
+        ));
+    }
+    for step in 0..10 {
+        for (k, &(a, b)) in ids.iter().enumerate() {
+            if k % 4 == step % 4 {
+                let p = random_pose(&mut rng, 12.0);
+                capped.set_pose(a, p).unwrap();
+                huge.set_pose(b, p).unwrap();
+            }
+        }
+        let got = huge.overlapping_pairs(0.1);
+        assert_eq!(got, all_pairs_within(&huge, 0.1), "step {step}");
+        // Handles carry their world: compare slots.
+        let slots = |v: Vec<(frcd_obb::BodyId, frcd_obb::BodyId)>| -> Vec<(u32, u32)> {
+            v.into_iter().map(|(a, b)| (a.index(), b.index())).collect()
+        };
+        assert_eq!(
+            slots(got),
+            slots(capped.overlapping_pairs(0.1)),
+            "step {step}"
+        );
+    }
+    assert_eq!(huge.broad_stats(), capped.broad_stats());
+}
+
 /// `overlapping_boxes` against all pairs: boxes of mixed sizes (a few long ones) filling a
 /// cube (the grid) and strung along z (the sweep), with and without a margin.
 #[test]
