@@ -1,7 +1,7 @@
 //! The World's broad phase under drift, for profiling (`perf record`) without criterion:
 //! `n` unit boxes in a cube (about 4 neighbours each), each drifting at its own speed (uniform
-//! in 0 to `speed` per step), median time per step of `overlapping_pairs` and the bodies
-//! re-inserted per step.
+//! in 0 to `speed` per step; a negative speed places every body anew in the cube each step),
+//! median time per step of `overlapping_pairs` and the bodies re-inserted per step.
 //!
 //! ```text
 //! cargo run --release -p frcd-obb --example broad_probe -- [n] [speed] [steps]
@@ -59,7 +59,15 @@ fn main() {
         let up: Vec<_> = ids
             .iter()
             .enumerate()
-            .map(|(i, &id)| (id, Pose::from_translation(centres[i] + vel[i] * k as f64)))
+            .map(|(i, &id)| {
+                // A negative speed: every body placed anew in the cube each step (shuffle).
+                let at = if speed < 0.0 {
+                    DVec3::new(rnd() * side, rnd() * side, rnd() * side)
+                } else {
+                    centres[i] + vel[i] * k as f64
+                };
+                (id, Pose::from_translation(at))
+            })
             .collect();
         w.set_poses(&up).expect("valid poses");
         let t = Instant::now();
