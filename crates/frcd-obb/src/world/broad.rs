@@ -485,8 +485,11 @@ fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
     if !(h.is_finite() && h > 0.0 && (0..3).all(fits)) {
         return false;
     }
-    // Monotone in x, so a box's cell range holds the cell of every point it covers.
-    let cell = |x: f64, k: usize| ((x - origin[k]) / h).floor() as u64;
+    // Monotone in x, so a box's cell range holds the cell of every point it covers. The
+    // conversion truncates, which is the floor for values >= 0 and gives 0 below (saturating,
+    // as the floor's conversion would, NaN included): no call to `floor` (not inlined without
+    // SSE4.1, 6 % of a rebuild of 4,096 boxes).
+    let cell = |x: f64, k: usize| ((x - origin[k]) / h) as u64;
     let key = |c: [u64; 3]| (c[0] << 42) | (c[1] << 21) | c[2];
     // First the sizes: a grid that would need more than `GRID_ENTRIES` entries per box, or
     // more boxes in the all-pairs list than `s.len() / 64` (at least 64), is refused, so the
