@@ -606,6 +606,39 @@ fn overlapping_boxes_equal_all_pairs() {
     assert!(frcd_obb::overlapping_boxes(&[], 0.0).is_empty());
 }
 
+/// Two crowded clusters far apart: the grid's cells are then many next to its entries (the
+/// entries are sorted, not counted into cells), and the pairs still equal all pairs.
+#[test]
+fn overlapping_boxes_of_far_clusters_equal_all_pairs() {
+    use frcd_geom::Aabb;
+    let mut rng = StdRng::seed_from_u64(11);
+    let boxes: Vec<Aabb> = (0..2200)
+        .map(|k| {
+            let offset = if k % 2 == 0 { 0.0 } else { 1e5 };
+            let c = DVec3::new(
+                offset + rng.random_range(0.0..12.0),
+                rng.random_range(0.0..12.0),
+                rng.random_range(0.0..12.0),
+            );
+            Aabb::new(c - DVec3::splat(0.6), c + DVec3::splat(0.6))
+        })
+        .collect();
+    let mut want = Vec::new();
+    for i in 0..boxes.len() {
+        for j in i + 1..boxes.len() {
+            if boxes_within(&boxes[i], &boxes[j], 0.1) {
+                want.push((i as u32, j as u32));
+            }
+        }
+    }
+    assert!(
+        want.len() > 2200,
+        "the clusters are crowded: {}",
+        want.len()
+    );
+    assert_eq!(frcd_obb::overlapping_boxes(&boxes, 0.1), want);
+}
+
 /// Whether two boxes are within `margin` of each other on every axis, written as the broad
 /// phase writes it (`min - max > margin` is apart), so the comparison is exact.
 fn boxes_within(a: &frcd_geom::Aabb, b: &frcd_geom::Aabb, margin: f64) -> bool {
