@@ -6,10 +6,9 @@
 mod boxtree;
 mod broad;
 mod clearance;
-
-pub use broad::overlapping_boxes;
 mod handle;
 
+pub use broad::overlapping_boxes;
 pub use clearance::{
     Apart, Clearance, ClearanceCache, ClearanceWork, SpinProfile, pair_clearance,
     pair_clearance_apart, pair_clearance_cached, pair_clearance_spin,

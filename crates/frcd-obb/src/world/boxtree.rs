@@ -49,6 +49,11 @@ fn area(b: &Aabb) -> f64 {
     d.x * d.y + d.y * d.z + d.z * d.x
 }
 
+/// Whether `outer` holds `b` (false for NaN bounds).
+pub(super) fn holds(outer: &Aabb, b: &Aabb) -> bool {
+    outer.min.cmple(b.min).all() && b.max.cmple(outer.max).all()
+}
+
 /// The broad phase's test: the boxes are within `margin` of each other on every axis, written
 /// as [`super::broad`] writes it so that every path agrees to the last bit.
 #[inline]
@@ -209,10 +214,9 @@ impl BoxTree {
     /// move is larger: the caller removes and re-inserts the leaf.
     pub(super) fn move_in_place(&mut self, slot: u32, b: Aabb) -> bool {
         let leaf = self.leaf_of[slot as usize];
-        let holds = |n: &Node| n.bounds.min.cmple(b.min).all() && b.max.cmple(n.bounds.max).all();
         let mut at = self.nodes[leaf as usize].parent;
         let mut levels = 0;
-        while at != NONE && !holds(&self.nodes[at as usize]) {
+        while at != NONE && !holds(&self.nodes[at as usize].bounds, &b) {
             levels += 1;
             if levels > MAX_GROWN_LEVELS {
                 return false;

@@ -1,7 +1,7 @@
 //! The broad phase: candidate pairs of grown boxes kept from step to step, found afresh by sweep
 //! and prune (or a uniform grid) when many bodies move far.
 
-use super::boxtree::{BoxTree, within};
+use super::boxtree::{BoxTree, holds, within};
 use frcd_geom::{Aabb, DVec3};
 
 /// A body's box as the sweep reads it: its extent along the sweep axis, then the other two
@@ -48,9 +48,9 @@ impl Swept {
 /// candidates are found afresh by a sweep along the centres' widest axis, or by a uniform grid
 /// where that sweep would be long ([`box_pairs`]).
 ///
-/// Why: re-finding every pair each step cost 27 ms for 65,536 unit boxes in a cube (a grid
-/// over all of them) and parry3d-f64's incremental BVH, re-fitted every step, 19 ms; see
-/// `benches/benches/world.rs` (`world/broad`) for the figures now.
+/// Why: re-finding every pair each step (the sweep or grid alone) was 1.05-2.3× slower than
+/// parry3d-f64's incremental BVH at 4,096-262,144 bodies; see `benches/benches/world.rs`
+/// (`world/broad`) and `testdata/bench/world-broad.md` for the figures now.
 #[derive(Debug, Default)]
 pub(super) struct BroadPhase {
     /// By slot: the body's box (valid where `live`).
@@ -235,9 +235,11 @@ impl BroadPhase {
             let i = s as usize;
             let fat = self.fatten(&self.tight[i]);
             self.fat[i] = fat;
-            // A leaf whose new box its near ancestors (almost) hold moves in place.
-            if rebuild_tree || !self.indexed[i] || !self.tree.move_in_place(s, fat) {
-                if self.indexed[i] && !rebuild_tree {
+            // A leaf already in the tree whose new box its near ancestors (almost) hold moves
+            // in place; any other is (re-)inserted.
+            let in_tree = self.indexed[i] && !rebuild_tree;
+            if !(in_tree && self.tree.move_in_place(s, fat)) {
+                if in_tree {
                     self.tree.remove(s);
                 }
                 self.tree.insert(s, fat);
@@ -347,11 +349,6 @@ pub(super) fn prefetch<T>(x: &T) {
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = x;
-}
-
-/// Whether `fat` holds `b` (false for NaN bounds).
-fn holds(fat: &Aabb, b: &Aabb) -> bool {
-    fat.min.cmple(b.min).all() && b.max.cmple(fat.max).all()
 }
 
 /// Two sorted lists merged (duplicates kept).
