@@ -603,14 +603,7 @@ fn cheapest_cut(
     if !usable.iter().any(|&u| u) {
         return None;
     }
-    for axis in bins.iter_mut() {
-        axis[..nb].fill(Bin::EMPTY);
-    }
-    for p in probes {
-        for k in 0..3 {
-            bins[k][bin_of(p.sum[k], min[k], scale[k], nb)].merge(&p.bounds, 1);
-        }
-    }
+    fill_bins(probes, min, scale, nb, bins);
     let total = probes.len() as u32;
     let mut best: Option<(f32, usize, usize)> = None;
     for k in (0..3).filter(|&k| usable[k]) {
@@ -650,6 +643,85 @@ fn cheapest_cut(
     })
 }
 
+/// Empties the first `nb` bins of each axis and merges each probe into its bin on each axis
+/// (bins of `min`, `scale`, `nb` as [`bin_of`]).
+/// In the AVX2 build where the CPU has it (`isa.rs`): a merge is one 256-bit minimum.
+#[inline(always)]
+fn fill_bins(
+    probes: &[Probe],
+    min: [f32; 3],
+    scale: [f32; 3],
+    nb: usize,
+    bins: &mut [[Bin; BINS]; 3],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if crate::isa::has_avx2() {
+        // SAFETY: the running CPU has AVX2 (`isa::has_avx2`), the one feature
+        // `fill_bins_avx2` is compiled with.
+        #[allow(unsafe_code)]
+        unsafe {
+            fill_bins_avx2(probes, min, scale, nb, bins)
+        };
+        return;
+    }
+    fill_bins_plain(probes, min, scale, nb, bins);
+}
+
+/// [`fill_bins`] in the baseline build.
+fn fill_bins_plain(
+    probes: &[Probe],
+    min: [f32; 3],
+    scale: [f32; 3],
+    nb: usize,
+    bins: &mut [[Bin; BINS]; 3],
+) {
+    for axis in bins.iter_mut() {
+        axis[..nb].fill(Bin::EMPTY);
+    }
+    for p in probes {
+        for k in 0..3 {
+            bins[k][bin_of(p.sum[k], min[k], scale[k], nb)].merge(&p.bounds, 1);
+        }
+    }
+}
+
+/// [`fill_bins`] with AVX2 intrinsics: [`Bin::merge`]'s `p < b ? p : b` is `vminps p, b`, so
+/// the bins get the same bits. (The compiler's own AVX2 build of the merge loop turned the
+/// select into masked stores, slower than the baseline.)
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(unsafe_code)]
+fn fill_bins_avx2(
+    probes: &[Probe],
+    min: [f32; 3],
+    scale: [f32; 3],
+    nb: usize,
+    bins: &mut [[Bin; BINS]; 3],
+) {
+    use core::arch::x86_64::*;
+    // Emptied with 256-bit stores too: a 256-bit load of a bin written by narrower stores
+    // would wait for them instead of taking their data forwarded.
+    let empty = _mm256_set1_ps(f32::INFINITY);
+    for axis in bins.iter_mut() {
+        for bin in &mut axis[..nb] {
+            // SAFETY: `bounds` is eight f32 (an unaligned store).
+            unsafe { _mm256_storeu_ps(bin.bounds.as_mut_ptr(), empty) };
+            bin.count = 0;
+        }
+    }
+    for p in probes {
+        // SAFETY: `bounds` is eight f32 (unaligned loads and stores).
+        let pb = unsafe { _mm256_loadu_ps(p.bounds.as_ptr()) };
+        for k in 0..3 {
+            let bin = &mut bins[k][bin_of(p.sum[k], min[k], scale[k], nb)];
+            let at = bin.bounds.as_mut_ptr();
+            // SAFETY: as above.
+            unsafe { _mm256_storeu_ps(at, _mm256_min_ps(pb, _mm256_loadu_ps(at))) };
+            bin.count += 1;
+        }
+    }
+}
+
 /// A cut chosen by [`cheapest_cut`]: triangles whose centroid falls in bins `..=last_left` of
 /// `axis` go left.
 #[derive(Clone, Copy, Debug)]
@@ -679,29 +751,19 @@ fn box_and_cost_split(
     debug_assert!(len == dst.len() && len == probes.len());
     let t = axes.transpose();
     let m = t * mean;
-    let mut lo = DVec3::splat(f64::INFINITY);
-    let mut hi = DVec3::splat(f64::NEG_INFINITY);
-    let mut mag = 0.0f64;
-    let mut smin = [f32::INFINITY; 3];
-    let mut smax = [f32::NEG_INFINITY; 3];
-    for (item, probe) in src.iter().zip(probes.iter_mut()) {
-        let [a, b, c] = item.v.map(|p| t * p);
-        let tlo = a.min(b).min(c);
-        let thi = a.max(b).max(c);
-        lo = lo.min(tlo);
-        hi = hi.max(thi);
-        mag = mag.max(item.mag);
-        let sum = (a + b + c - 3.0 * m).as_vec3();
-        for k in 0..3 {
-            smin[k] = smin[k].min(sum[k]);
-            smax[k] = smax[k].max(sum[k]);
+    let (lo, hi, mag) = project(&t, m, src, probes);
+    // The centroids' range, in a pass of its own over the probes (in the pass above its six
+    // accumulators spilled registers).
+    let mut smin = [f32::INFINITY; 4];
+    let mut smax = [f32::NEG_INFINITY; 4];
+    for p in probes.iter() {
+        for k in 0..4 {
+            let v = p.sum[k];
+            smin[k] = if v < smin[k] { v } else { smin[k] };
+            smax[k] = if v > smax[k] { v } else { smax[k] };
         }
-        let (l, h) = ((tlo - m).as_vec3(), (m - thi).as_vec3());
-        *probe = Probe {
-            bounds: [l.x, l.y, l.z, 0.0, h.x, h.y, h.z, 0.0],
-            sum: [sum.x, sum.y, sum.z, 0.0],
-        };
     }
+    let (smin, smax) = ([smin[0], smin[1], smin[2]], [smax[0], smax[1], smax[2]]);
     let obb = Obb::from_projection_bounds(axes, lo, hi, mag);
     let left = if len <= EXHAUSTIVE_MAX {
         let mask = cheapest_partition(probes);
@@ -715,6 +777,134 @@ fn box_and_cost_split(
         }
     };
     (obb, kept_or_fallback(&axes, mean, dst, left))
+}
+
+/// [`box_and_cost_split`]'s first pass: the bounds of the vertices `t · p` of `src`'s triangles
+/// (the rows of `t` are the box axes), their largest magnitude, and each triangle's [`Probe`]
+/// relative to `m` (the node's mean in the same frame). Run in the AVX2 build where the CPU
+/// has it (as the wide traversal, `isa.rs`): the same operations in the same order, so the
+/// same bits, in one 256-bit register per vertex instead of two 128-bit ones.
+fn project(t: &DMat3, m: DVec3, src: &[Item], probes: &mut [Probe]) -> (DVec3, DVec3, f64) {
+    #[cfg(target_arch = "x86_64")]
+    if crate::isa::has_avx2() {
+        // SAFETY: the running CPU has AVX2 (`isa::has_avx2`), the one feature
+        // `project_avx2` is compiled with.
+        #[allow(unsafe_code)]
+        return unsafe { project_avx2(t, m, src, probes) };
+    }
+    project_body(t, m, src, probes)
+}
+
+/// [`project_body`] written with AVX2 intrinsics, one 256-bit register per vertex (the
+/// compiler's own vectorisation of the lane arrays shuffled more than it computed): the same
+/// IEEE operations in the same order and with the same operands, so the same bits, NaN and
+/// signed zeros included (`vminpd x, y` is `x < y ? x : y`, which is [`min_lane`]`(y, x)`).
+/// Tested against [`project_body`] (`both_projections_give_the_same_bits`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(unsafe_code)]
+fn project_avx2(t: &DMat3, m: DVec3, src: &[Item], probes: &mut [Probe]) -> (DVec3, DVec3, f64) {
+    use core::arch::x86_64::*;
+    let col = |c: DVec3| _mm256_setr_pd(c.x, c.y, c.z, 0.0);
+    let (c0, c1, c2) = (col(t.x_axis), col(t.y_axis), col(t.z_axis));
+    let m4 = col(m);
+    let m3 = _mm256_mul_pd(_mm256_set1_pd(3.0), m4);
+    // Lane 3 of a product is ±0 (0 times a coordinate); the probes' padding is +0.
+    let keep = _mm256_castsi256_pd(_mm256_setr_epi64x(-1, -1, -1, 0));
+    let mut lo = _mm256_set1_pd(f64::INFINITY);
+    let mut hi = _mm256_set1_pd(f64::NEG_INFINITY);
+    let mut mag = 0.0f64;
+    for (item, probe) in src.iter().zip(probes.iter_mut()) {
+        // `t * p` lane by lane: `(t₀ₖ pₓ + t₁ₖ p_y) + t₂ₖ p_z`.
+        macro_rules! project {
+            ($p:expr) => {
+                _mm256_add_pd(
+                    _mm256_add_pd(
+                        _mm256_mul_pd(c0, _mm256_set1_pd($p.x)),
+                        _mm256_mul_pd(c1, _mm256_set1_pd($p.y)),
+                    ),
+                    _mm256_mul_pd(c2, _mm256_set1_pd($p.z)),
+                )
+            };
+        }
+        let a = project!(item.v[0]);
+        let b = project!(item.v[1]);
+        let c = project!(item.v[2]);
+        let tlo = _mm256_min_pd(c, _mm256_min_pd(b, a));
+        let thi = _mm256_max_pd(c, _mm256_max_pd(b, a));
+        lo = _mm256_min_pd(tlo, lo);
+        hi = _mm256_max_pd(thi, hi);
+        let sum = _mm256_sub_pd(_mm256_add_pd(_mm256_add_pd(a, b), c), m3);
+        let l = _mm256_cvtpd_ps(_mm256_and_pd(_mm256_sub_pd(tlo, m4), keep));
+        let h = _mm256_cvtpd_ps(_mm256_and_pd(_mm256_sub_pd(m4, thi), keep));
+        let sum = _mm256_cvtpd_ps(_mm256_and_pd(sum, keep));
+        // SAFETY: `Probe` is `repr(C)`: `bounds` is eight f32 at offset 0, `sum` four at 32;
+        // the stores are unaligned ones.
+        unsafe {
+            let at = (probe as *mut Probe).cast::<f32>();
+            _mm_storeu_ps(at, l);
+            _mm_storeu_ps(at.add(4), h);
+            _mm_storeu_ps(at.add(8), sum);
+        }
+        mag = max_lane(mag, item.mag);
+    }
+    let mut out = [[0.0f64; 4]; 2];
+    // SAFETY: two unaligned stores into arrays of four f64.
+    unsafe {
+        _mm256_storeu_pd(out[0].as_mut_ptr(), lo);
+        _mm256_storeu_pd(out[1].as_mut_ptr(), hi);
+    }
+    let v = |x: [f64; 4]| DVec3::new(x[0], x[1], x[2]);
+    (v(out[0]), v(out[1]), mag)
+}
+
+/// The body of [`project`] (the baseline build): each lane computes what `t * p` computes for
+/// its row, `(t₀ₖ pₓ + t₁ₖ p_y) + t₂ₖ p_z`, and the probe what [`Probe`] documents.
+#[inline(always)]
+fn project_body(t: &DMat3, m: DVec3, src: &[Item], probes: &mut [Probe]) -> (DVec3, DVec3, f64) {
+    let col = |c: DVec3| [c.x, c.y, c.z];
+    let cols = [col(t.x_axis), col(t.y_axis), col(t.z_axis)];
+    let m = col(m);
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    let mut mag = 0.0f64;
+    for (item, probe) in src.iter().zip(probes.iter_mut()) {
+        let mut q = [[0.0f64; 3]; 3];
+        for (q, p) in q.iter_mut().zip(&item.v) {
+            for k in 0..3 {
+                q[k] = cols[0][k] * p.x + cols[1][k] * p.y + cols[2][k] * p.z;
+            }
+        }
+        let [a, b, c] = q;
+        let mut out = Probe::default();
+        for k in 0..3 {
+            let tlo = min_lane(min_lane(a[k], b[k]), c[k]);
+            let thi = max_lane(max_lane(a[k], b[k]), c[k]);
+            lo[k] = min_lane(lo[k], tlo);
+            hi[k] = max_lane(hi[k], thi);
+            out.bounds[k] = (tlo - m[k]) as f32;
+            out.bounds[k + 4] = (m[k] - thi) as f32;
+            out.sum[k] = (a[k] + b[k] + c[k] - 3.0 * m[k]) as f32;
+        }
+        *probe = out;
+        mag = max_lane(mag, item.mag);
+    }
+    let v = |x: [f64; 3]| DVec3::new(x[0], x[1], x[2]);
+    (v(lo), v(hi), mag)
+}
+
+/// `min(a, b)` as a plain compare and select (`minsd`/`minpd`): a NaN `b` is skipped (the
+/// build's accumulators start finite and never take one), like [`f64::min`], whose NaN test
+/// costs four more instructions per lane; only the sign of a zero may differ.
+#[inline(always)]
+fn min_lane(a: f64, b: f64) -> f64 {
+    if b < a { b } else { a }
+}
+
+/// `max(a, b)` as [`min_lane`].
+#[inline(always)]
+fn max_lane(a: f64, b: f64) -> f64 {
+    if b > a { b } else { a }
 }
 
 /// Copies `src` into `dst`, the triangles for which `right(i)` is false to the front in order
@@ -1359,6 +1549,175 @@ mod tests {
     /// Nodes of up to `EXHAUSTIVE_MAX` triangles take the cheapest of all their partitions:
     /// never costlier than any other partition, the binned cut's included, and none at all
     /// (the caller's fallback) when no cost is finite.
+    /// The AVX2 build of the first pass gives the baseline's bits: bounds, magnitude and every
+    /// probe, over ordinary, huge (overflowing to infinities and NaN), subnormal and signed-zero
+    /// coordinates and random axes.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn both_projections_give_the_same_bits() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("SKIP: no AVX2 on this CPU");
+            return;
+        }
+        let same = |t: &DMat3, m: DVec3, items: &[Item], what: &str| -> Vec<Probe> {
+            let mut p0 = vec![Probe::default(); items.len()];
+            let mut p1 = vec![Probe::default(); items.len()];
+            let r0 = project_body(t, *t * m, items, &mut p0);
+            // SAFETY: the CPU has AVX2 (checked above).
+            #[allow(unsafe_code)]
+            let r1 = unsafe { project_avx2(t, *t * m, items, &mut p1) };
+            let bits = |v: DVec3| v.to_array().map(f64::to_bits);
+            assert_eq!(bits(r0.0), bits(r1.0), "{what}: lo");
+            assert_eq!(bits(r0.1), bits(r1.1), "{what}: hi");
+            assert_eq!(r0.2.to_bits(), r1.2.to_bits(), "{what}: magnitude");
+            let f = |p: &Probe| {
+                let mut out = p.bounds.map(f32::to_bits).to_vec();
+                out.extend(p.sum.map(f32::to_bits));
+                out
+            };
+            for (a, b) in p0.iter().zip(&p1) {
+                assert_eq!(f(a), f(b), "{what}: probe");
+            }
+            p0
+        };
+        let item = |v: [DVec3; 3]| Item {
+            v,
+            mag: magnitude(&Triangle { v }),
+            id: 0,
+        };
+        // Signed zeros, in every order of the vertices and of two triangles: with the identity
+        // axes and a zero mean, `(−0, −1, −1)` projects to −0 on x and `(0, 1, 1)` to +0, and
+        // the probes keep the sign, so an operand order that differs from the baseline's shows.
+        let zeros = [
+            DVec3::new(-0.0, -1.0, -1.0),
+            DVec3::new(0.0, 1.0, 1.0),
+            DVec3::new(2.0, 1.0, 1.0),
+        ];
+        let mut negative_zeros = 0;
+        for code in 0..27 * 27 {
+            let tri = |c: usize| item([zeros[c % 3], zeros[c / 3 % 3], zeros[c / 9]]);
+            let items = [tri(code % 27), tri(code / 27)];
+            let probes = same(&DMat3::IDENTITY, DVec3::ZERO, &items, "signed zeros");
+            negative_zeros += probes
+                .iter()
+                .filter(|p| p.bounds[0].to_bits() == (-0.0f32).to_bits())
+                .count();
+        }
+        assert!(negative_zeros > 0, "the cases hold no −0 bound");
+        // Infinite projections (a sum of products past the largest f64) and NaN centroid
+        // sums (+inf and −inf vertices in one triangle), under a rotation with no zero entry,
+        // for every sign pattern of the coordinates.
+        let axes = DMat3::from_quat(frcd_geom::DQuat::from_axis_angle(
+            DVec3::new(1.0, 2.0, 3.0).normalize(),
+            0.7,
+        ));
+        let big = 1.5e308;
+        let mut nans = 0;
+        for code in 0..8 {
+            let s = |bit: usize| if code >> bit & 1 == 0 { big } else { -big };
+            let v = DVec3::new(s(0), s(1), s(2));
+            let items = [item([v, -v, DVec3::ONE]), item([DVec3::ZERO, v, DVec3::X])];
+            let probes = same(&axes.transpose(), DVec3::ZERO, &items, "overflow");
+            nans += probes
+                .iter()
+                .filter(|p| p.sum[..3].iter().any(|x| x.is_nan()))
+                .count();
+        }
+        assert!(nans > 0, "the cases hold no NaN sum");
+        let mut rng = Rng(0xa2);
+        // Signed zeros (with the identity axes a vertex `(−0, −1, −1)` projects to −0 and
+        // `(0, 1, 1)` to +0, so the order of a minimum's operands shows), values whose sums
+        // overflow to ±infinity and then NaN, subnormals.
+        let specials = [0.0, -0.0, 1.5e308, -1.5e308, 4e-320, -4e-320, 1.0, -1.0];
+        for round in 0..200 {
+            let q = frcd_geom::DQuat::from_axis_angle(
+                DVec3::new(rng.next() - 0.5, rng.next() - 0.5, rng.next() + 0.1).normalize(),
+                rng.next() * 7.0,
+            );
+            let axes = if round % 10 == 0 {
+                DMat3::IDENTITY
+            } else {
+                DMat3::from_quat(q)
+            };
+            let t = axes.transpose();
+            let m = DVec3::new(rng.next() - 0.5, rng.next(), -rng.next()) * 10.0;
+            let mut coord = |k: usize| {
+                if round % 10 == 0 || (round + k).is_multiple_of(3) {
+                    specials[(rng.next() * 8.0) as usize % 8]
+                } else {
+                    (rng.next() - 0.5) * 20.0
+                }
+            };
+            let items: Vec<Item> = (0..1 + round % 37)
+                .map(|i| {
+                    let v = [0, 1, 2]
+                        .map(|j| DVec3::new(coord(i + j), coord(i + j + 1), coord(i + 2 * j)));
+                    let t = Triangle { v };
+                    Item {
+                        v,
+                        mag: magnitude(&t),
+                        id: i as u32,
+                    }
+                })
+                .collect();
+            same(&t, m, &items, &format!("round {round}"));
+        }
+    }
+
+    /// The AVX2 build of the binning fills the bins with the baseline's bits and counts, over
+    /// probes with signed zeros and every node size up to beyond the bin count.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn both_binnings_give_the_same_bits() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("SKIP: no AVX2 on this CPU");
+            return;
+        }
+        let mut rng = Rng(0xb1);
+        let value = |rng: &mut Rng| match (rng.next() * 8.0) as u32 {
+            0 => 0.0f32,
+            1 => -0.0,
+            _ => (rng.next() * 4.0 - 2.0) as f32,
+        };
+        for n in 1..40 {
+            let probes: Vec<Probe> = (0..n)
+                .map(|_| Probe {
+                    bounds: [0; 8].map(|_| value(&mut rng)),
+                    sum: [0; 4].map(|_| value(&mut rng)),
+                })
+                .collect();
+            let nb = n.clamp(2, BINS);
+            let min = [-2.0f32; 3];
+            let scale = [nb as f32 / 4.0; 3];
+            // Stale contents, as a build leaves them.
+            let mut plain = [[Bin::EMPTY; BINS]; 3];
+            for axis in plain.iter_mut() {
+                for bin in axis.iter_mut() {
+                    bin.bounds = [0; 8].map(|_| value(&mut rng));
+                    bin.count = 7;
+                }
+            }
+            let mut wide = plain;
+            fill_bins_plain(&probes, min, scale, nb, &mut plain);
+            // SAFETY: the CPU has AVX2 (checked above).
+            #[allow(unsafe_code)]
+            unsafe {
+                fill_bins_avx2(&probes, min, scale, nb, &mut wide)
+            };
+            for k in 0..3 {
+                for b in 0..nb {
+                    let (x, y) = (&plain[k][b], &wide[k][b]);
+                    assert_eq!(x.count, y.count, "n {n} axis {k} bin {b}");
+                    assert_eq!(
+                        x.bounds.map(f32::to_bits),
+                        y.bounds.map(f32::to_bits),
+                        "n {n} axis {k} bin {b}"
+                    );
+                }
+            }
+        }
+    }
+
     #[test]
     fn small_nodes_take_the_cheapest_of_all_partitions() {
         let mut rng = Rng(0x5a11);
