@@ -162,10 +162,7 @@ fn build_into(mesh: &TriMesh, options: &BuildOptions, sink: &mut impl Sink) -> V
     let mut bins = [[Bin::EMPTY; BINS]; 3];
     let mut order = vec![0u32; n];
     let nodes = sink;
-    // A leaf holds at least one triangle, so a tree has at most 2n − 1 nodes: reserved at once,
-    // the array never grows (a grown copy of the nodes cost 1-3 % of a build; the caller's
-    // `shrink_to_fit` gives back the untouched rest).
-    nodes.reserve((2 * n).max(1) - 1);
+    nodes.reserve(2 * n.div_ceil(leaf));
     let root = {
         let sum = front.iter().map(|t| t.triangle().centroid()).sum::<DVec3>();
         let m = Moments::of(&front, sum / n.max(1) as f64);
