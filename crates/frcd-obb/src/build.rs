@@ -296,14 +296,35 @@ fn node_fit(
 /// triangles their plane's frame, see [`node_fit`]).
 fn leaf_obb(items: &[Item], axes: Option<DMat3>, fit: FitMethod) -> Obb {
     if let [t] = items {
-        if let Some(obb) = triangle_obb(&t.triangle()) {
-            return obb;
+        if let Some(frame) = triangle_frame(&t.triangle()) {
+            return leaf_box(items, frame);
         }
     }
     match axes {
-        Some(axes) => Obb::from_point_iter_with_axes(items.iter().flat_map(|t| t.v), axes),
+        Some(axes) => leaf_box(items, axes),
         None => fit_obb(&items.iter().map(Item::triangle).collect::<Vec<_>>(), fit),
     }
+}
+
+/// The box with `axes` of a leaf's triangles (at least one): [`Obb::from_points_with_axes`]
+/// over their vertices (the same values; the bounds by plain compare-select, see
+/// [`min_lane`], and the magnitude from the items' own).
+fn leaf_box(items: &[Item], axes: DMat3) -> Obb {
+    let t = axes.transpose();
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    let mut mag = 0.0f64;
+    for item in items {
+        for p in &item.v {
+            let q = (t * *p).to_array();
+            for k in 0..3 {
+                lo[k] = min_lane(lo[k], q[k]);
+                hi[k] = max_lane(hi[k], q[k]);
+            }
+        }
+        mag = max_lane(mag, item.mag);
+    }
+    Obb::from_projection_bounds(axes, DVec3::from_array(lo), DVec3::from_array(hi), mag)
 }
 
 /// Sums over a node's triangles, gathered by its parent's pass: the vertices' first and second
@@ -1145,9 +1166,15 @@ fn pair_frame(a: &Item, b: &Item) -> Option<DMat3> {
     Some(DMat3::from_cols(x, n.cross(x), n))
 }
 
-/// The box of one triangle in its own frame (longest edge, in-plane normal to it, normal):
-/// flat and tight whatever the fit rule. `None` for a triangle without a usable normal.
+/// The box of one triangle in its own frame ([`triangle_frame`]), as a leaf gets it.
+#[cfg(test)]
 fn triangle_obb(t: &Triangle) -> Option<Obb> {
+    triangle_frame(t).map(|axes| Obb::from_points_with_axes(&t.v, axes))
+}
+
+/// One triangle's own frame (longest edge, in-plane normal to it, normal), in which its box is
+/// flat and tight whatever the fit rule. `None` for a triangle without a usable normal.
+fn triangle_frame(t: &Triangle) -> Option<DMat3> {
     let e = [t.v[1] - t.v[0], t.v[2] - t.v[1], t.v[0] - t.v[2]];
     let longest = e
         .iter()
@@ -1160,7 +1187,7 @@ fn triangle_obb(t: &Triangle) -> Option<Obb> {
         return None;
     }
     let y = z.cross(x);
-    Some(Obb::from_points_with_axes(&t.v, DMat3::from_cols(x, y, z)))
+    Some(DMat3::from_cols(x, y, z))
 }
 
 /// [`box_and_split`]'s partition when the major axis leaves one side empty: the other two axes,

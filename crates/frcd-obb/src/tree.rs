@@ -454,7 +454,10 @@ mod tests {
             };
             let tree = ObbTree::build(&mesh, &options);
             let (len, capacity) = (tree.nodes.len(), tree.nodes.capacity());
-            assert!(capacity - len <= len / 8, "leaf {leaf}: {capacity} for {len}");
+            assert!(
+                capacity - len <= len / 8,
+                "leaf {leaf}: {capacity} for {len}"
+            );
             assert_eq!(tree.order.capacity(), tree.order.len(), "leaf {leaf}");
             let bytes = tree.memory_bytes();
             let exact = std::mem::size_of::<ObbTree>()
