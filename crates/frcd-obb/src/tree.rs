@@ -52,7 +52,7 @@ pub struct BuildOptions {
     /// `0` is treated as `1`. The default, 2, was measured against 1 on every bench class with
     /// the 64-byte f32 nodes (`FRCD_BENCH_LEAF`, see the crate README): leaf 2 was faster on the
     /// dense sweep (all pairs 14 %), the knots and the fandisk pair, 10-16 % slower on the
-    /// railway CAD pairs, and it holds mesh + tree at about 105-110 B per triangle against
+    /// railway CAD pairs, and it holds mesh + tree at about 108-117 B per triangle against
     /// 156-165 at leaf 1 (target ≤ 150).
     pub max_leaf_triangles: u32,
     /// Rule choosing where each internal node splits its triangles. The default,
@@ -243,7 +243,7 @@ impl ObbTree {
     /// copies the nodes two levels below each internal node at even depth into four-lane
     /// blocks (about 77 B per triangle at leaf 2, built by the first collision query), so a
     /// traversal step loads its lanes instead of gathering four nodes. Without it mesh + tree
-    /// stay at about 110-115 B per triangle and the box work is slower (the crate README gives
+    /// stay at about 108-117 B per triangle and the box work is slower (the crate README gives
     /// the measured cost); answers are the same either way.
     ///
     /// ```
