@@ -11,7 +11,10 @@
 //!
 //! - `build/ratio` lines: per mesh, the two builds interleaved build by build for about three
 //!   seconds (the machine's load moves both alike), medians and their ratio, with the load
-//!   average. Meshes: an icosphere of 20,480 triangles, a torus knot of 49,920, and the CAD
+//!   average. The allocator couples the two builders: what one frees moves glibc's mmap
+//!   threshold, and so the other's page faults (parry3d-f64's icosphere build took 6.2-8.8 ms
+//!   depending on the frcd build beside it). Run one mesh per process (`FRCD_BUILD_ONLY`) as
+//!   well, and compare frcd's own times between binaries. Meshes: an icosphere of 20,480 triangles, a torus knot of 49,920, and the CAD
 //!   meshes of `../shared/meshes` (the intermodal wagon underframe, 18,824 triangles; the bogie
 //!   frame, 5,268; the fandisk, 5,750; SKIP when the folder is absent).
 //! - `build/quality` lines (unless `FRCD_BUILD_QUALITY=0`): box and triangle tests per query of
