@@ -194,7 +194,7 @@ impl ObbTree {
     ) -> Self {
         // The build pushes nodes one by one (their count is known only at the end) into an
         // array sized by estimate. A spare eighth or less is kept: shrinking copies the whole
-        // array (64-byte alignment rules out a reallocation in place), 3-5 % of a build.
+        // array (64-byte alignment rules out a reallocation in place), 2-5 % of a build.
         if nodes.capacity() - nodes.len() > nodes.len() / 8 {
             nodes.shrink_to_fit();
         }
@@ -439,7 +439,7 @@ mod tests {
     use super::*;
 
     /// The node array keeps at most an eighth spare (it once held up to twice the nodes it
-    /// used, about 64 B per triangle; an exact fit costs a copy of the array, 3-5 % of a
+    /// used, about 64 B per triangle; an exact fit costs a copy of the array, 2-5 % of a
     /// build), the leaf order none, and `memory_bytes` counts what is allocated.
     #[test]
     fn built_tree_holds_little_spare_capacity() {
