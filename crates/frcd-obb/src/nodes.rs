@@ -95,10 +95,10 @@ impl TNode {
     pub fn axes(&self) -> DMat3 {
         DMat3::from_cols(v64(self.u[0]), v64(self.u[1]), v64(self.u[2]))
     }
-    /// `|h|²`, the size used to choose which box to split.
+    /// `h₀ + h₁ + h₂`, the size used to choose which box to split.
     #[inline(always)]
-    pub fn size2(&self) -> f32 {
-        self.h[0] * self.h[0] + self.h[1] * self.h[1] + self.h[2] * self.h[2]
+    pub fn size(&self) -> f32 {
+        self.h[0] + self.h[1] + self.h[2]
     }
 
     /// An f64 box with orthonormal axes (to f64 precision) holding this node's f32 box, hence

@@ -131,7 +131,7 @@ impl F4 {
         self.map2(o, |a, b| if b > a { b } else { a })
     }
     /// Bit `k` set where lane `k` is `> 0`.
-    #[inline(always)]
+    #[cfg(test)]
     pub fn positive(self) -> u32 {
         (0..4).fold(0, |m, k| m | ((self.0[k] > 0.0) as u32) << k)
     }
