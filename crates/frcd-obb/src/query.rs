@@ -321,15 +321,15 @@ fn split_a(na: &TNode, nb: &TNode) -> bool {
 fn deepest_last(m: &wide::F4, n: usize) -> ([usize; 4], usize) {
     let mut keys = [0u64; 4];
     let mut len = 0;
-    for k in 0..4 {
-        let bits = m.0[k].to_bits() as i32;
+    for (k, (&margin, slot)) in m.0.iter().zip(&mut keys).enumerate() {
+        let bits = margin.to_bits() as i32;
         // Total order of f32 as i32 (NaN above +inf), shifted to [1, 2^32] so that 0 stays
         // below every lane that is expanded.
         let key = (bits ^ ((((bits >> 31) as u32) >> 1) as i32)) as i64 + (1 << 31) + 1;
         #[allow(clippy::neg_cmp_op_on_partial_ord)]
-        let expand = k < n && !(m.0[k] > 0.0);
+        let expand = k < n && !(margin > 0.0);
         // A mask, not a branch: the compiler keeps `if` as a jump on the margin.
-        keys[k] = ((key as u64) << 2 | (3 - k) as u64) & (expand as u64).wrapping_neg();
+        *slot = ((key as u64) << 2 | (3 - k) as u64) & (expand as u64).wrapping_neg();
         len += expand as usize;
     }
     let exchange = |keys: &mut [u64; 4], p: usize, q: usize| {
