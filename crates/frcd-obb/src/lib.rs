@@ -1,6 +1,7 @@
 #![doc = include_str!("../README.md")]
-// The crate's only unsafe code: two calls into the AVX2 build of the traversal and of the front
-// walk, entered only after the CPU was checked for AVX2 (`isa.rs`, `query.rs`).
+// The crate's unsafe code: the calls into the AVX2 builds (traversal, front walk, the build's
+// passes), entered only after the CPU was checked for AVX2 (`isa.rs`), and the AVX2
+// intrinsics of the traversal's eight-lane test (`wide::avx`), which only that build runs.
 #![deny(unsafe_code)]
 //! ## API overview
 //!

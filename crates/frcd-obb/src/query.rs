@@ -528,6 +528,81 @@ impl PlacedTriangle {
     }
 }
 
+/// One step of the wide traversal: a stack entry, which node it splits and the children it
+/// tests.
+#[derive(Clone, Copy)]
+struct StepMeta {
+    entry: (u32, u32, u32),
+    /// A's node splits (its children against B's placed box), else B's.
+    split_a: bool,
+    ids: [u32; 4],
+    n: usize,
+    /// B splits: the block of the stack's placed lanes that holds B's children.
+    block: u32,
+}
+
+impl StepMeta {
+    /// Pushes the lanes that `m` does not separate (margin not positive), last lane first so
+    /// that the leftmost is expanded first, and records the separated ones in `front` when one
+    /// is being recorded. Without a front, branch-free: every lane written, the overlapping
+    /// ones kept.
+    #[inline(always)]
+    fn push<const RECORD: bool>(&self, stack: &mut Stack, front: &mut Recording<'_>, m: wide::F4) {
+        let (i, j, p) = self.entry;
+        if RECORD {
+            for k in (0..self.n).rev() {
+                let (a, b, q) = if self.split_a {
+                    (self.ids[k], j, p)
+                } else {
+                    (i, self.ids[k], self.block << 2 | k as u32)
+                };
+                if m.0[k] > 0.0 {
+                    record_separated(front, a, b, wide::margin64(m.0[k]));
+                } else {
+                    stack.pairs.push((a, b, q));
+                }
+            }
+            return;
+        }
+        let top = stack.pairs.len();
+        stack.pairs.resize(top + 4, (0, 0, 0));
+        let mut len = top;
+        if self.split_a {
+            for k in (0..self.n).rev() {
+                stack.pairs[len] = (self.ids[k], j, p);
+                len += 1 - (m.0[k] > 0.0) as usize;
+            }
+        } else {
+            let block = self.block << 2;
+            for k in (0..self.n).rev() {
+                stack.pairs[len] = (i, self.ids[k], block | k as u32);
+                len += 1 - (m.0[k] > 0.0) as usize;
+            }
+        }
+        stack.pairs.truncate(len);
+    }
+}
+
+/// A step with its lanes for the four-lane test ([`Ctx::step_lanes`]).
+struct Step {
+    meta: StepMeta,
+    a: ALanes,
+    /// B's placed box in every lane (A splits; B splits keep theirs in `meta.block`).
+    b: BLanes,
+}
+
+impl Step {
+    /// The B lanes of the test.
+    #[inline(always)]
+    fn b<'s>(&'s self, stack: &'s Stack) -> &'s BLanes {
+        if self.meta.split_a {
+            &self.b
+        } else {
+            &stack.placed32[self.meta.block as usize]
+        }
+    }
+}
+
 /// The traversal stack: node pairs, each naming its B box (placed in A's frame) in `placed`
 /// (f64 boxes for the f64 traversal) or in `placed32` (the wide f32 traversal: the lanes one
 /// step placed, kept whole, named `4 · block + lane`).
@@ -924,7 +999,7 @@ impl<'a> Ctx<'a> {
                 self.descend_wide_avx2(sat, i, j, overlapping_start, stack, front, hit)
             };
         }
-        self.descend_wide_body(sat, i, j, overlapping_start, stack, front, hit)
+        self.descend_wide_body::<false>(sat, i, j, overlapping_start, stack, front, hit)
     }
 
     /// [`Ctx::descend_wide`] compiled with AVX2 (`isa.rs`): the same operations, encoded with
@@ -942,13 +1017,14 @@ impl<'a> Ctx<'a> {
         front: Recording<'_>,
         hit: &mut impl FnMut(u32, u32) -> bool,
     ) -> bool {
-        self.descend_wide_body(sat, i, j, overlapping_start, stack, front, hit)
+        self.descend_wide_body::<true>(sat, i, j, overlapping_start, stack, front, hit)
     }
 
-    /// The body of [`Ctx::descend_wide`], inlined into each of its instruction-set builds.
+    /// The body of [`Ctx::descend_wide`], inlined into each of its instruction-set builds
+    /// (`AVX`: the AVX2 build, which runs paired steps as eight-lane tests).
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn descend_wide_body(
+    fn descend_wide_body<const AVX: bool>(
         &mut self,
         sat: &Sat32,
         i: u32,
@@ -983,31 +1059,92 @@ impl<'a> Ctx<'a> {
         stack.placed32.push(start);
         stack.pairs.push((i, j, (pbase as u32) << 2));
         if self.ordered_steps > 0 && front.is_none() {
-            if let Some(stop) = self.wide_steps::<true>(
-                sat,
-                base,
-                pbase,
-                stack,
-                &mut front,
-                hit,
-                self.ordered_steps,
-            ) {
+            if let Some(stop) = self.ordered_loop(sat, base, pbase, stack, hit, self.ordered_steps)
+            {
                 return stop;
             }
         }
-        self.wide_steps::<false>(sat, base, pbase, stack, &mut front, hit, 0)
-            .unwrap_or(false)
+        // One instance per case, so that the plain loop carries no front checks.
+        if front.is_none() {
+            self.paired_steps::<AVX, false>(sat, base, pbase, stack, &mut front, hit)
+        } else {
+            self.paired_steps::<AVX, true>(sat, base, pbase, stack, &mut front, hit)
+        }
     }
 
-    /// The loop of [`Ctx::descend_wide_body`] over the stack above `base`: `Some(true)` when
-    /// `hit` stopped the traversal, `Some(false)` when the stack is done. `ORDERED` (first
-    /// contact's first steps, no front recorded): each step pushes its overlapping lanes deepest
-    /// last ([`ORDERED_STEPS`]), for at most `ordered` steps, then returns `None` with the
-    /// stack as it is for the plain loop to go on. A separate instance, so that the plain loop,
-    /// where the time goes, carries no step count.
+    /// The lanes of one traversal step on the stack entry `(i, j, p)` (not a leaf pair): the
+    /// split node's children two levels down against the other node, counted as box tests
+    /// (and placements, where B's children are placed).
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
-    fn wide_steps<const ORDERED: bool>(
+    fn step_lanes(&mut self, sat: &Sat32, stack: &mut Stack, (i, j, p): (u32, u32, u32)) -> Step {
+        let (a, b) = (self.a, self.b);
+        let na = &a.nodes[i as usize];
+        let nb = &b.nodes[j as usize];
+        if split_a(na, nb) {
+            let qa_all = a.quads();
+            let qa = qa_all.of[i as usize];
+            let (ids, n, lanes) = if qa != NO_QUAD {
+                let q = &qa_all.quads[(qa >> 2) as usize];
+                (q.ids, (qa & 3) as usize + 1, ALanes::from_quad(q))
+            } else {
+                let (ids, n) = quad_ids(&a.nodes, i);
+                (ids, n, ALanes::gather(&a.nodes, &ids, n))
+            };
+            self.counters.box_tests += n as u64;
+            let pb = stack.placed32[(p >> 2) as usize].broadcast((p & 3) as usize);
+            Step {
+                meta: StepMeta {
+                    entry: (i, j, p),
+                    split_a: true,
+                    ids,
+                    n,
+                    block: 0,
+                },
+                a: lanes,
+                b: pb,
+            }
+        } else {
+            let qb_all = b.quads();
+            let qb = qb_all.of[j as usize];
+            let (ids, n, lanes) = if qb != NO_QUAD {
+                let q = &qb_all.quads[(qb >> 2) as usize];
+                (q.ids, (qb & 3) as usize + 1, sat.place_quad(q))
+            } else {
+                let (ids, n) = quad_ids(&b.nodes, j);
+                (ids, n, sat.place_lanes(&b.nodes, &ids, n))
+            };
+            self.counters.box_tests += n as u64;
+            self.counters.placements += n as u64;
+            // Stored at once as a new block (a copy of the lanes kept in the step went
+            // through memcpy twice). The caller pushes B splits' entries after A splits'.
+            let block = stack.placed32.len() as u32;
+            stack.placed32.push(lanes);
+            Step {
+                meta: StepMeta {
+                    entry: (i, j, p),
+                    split_a: false,
+                    ids,
+                    n,
+                    block,
+                },
+                a: ALanes::splat(na),
+                b: BLanes::default(),
+            }
+        }
+    }
+
+    /// The main loop of [`Ctx::descend_wide_body`]: each step pops two entries (the second
+    /// unless it is a leaf pair) and tests both steps' lanes at once, in the AVX2 build as one
+    /// eight-lane test ([`wide::avx::separation8`]: twice the lanes for about 1.2× the
+    /// instructions of one four-lane test), in the baseline build as two four-lane tests. The
+    /// same pairs are tested and kept as one entry at a time would, in another order on the
+    /// stack; both builds take the same order, so their answers, counters and (with `RECORD`,
+    /// a front being recorded, each separated lane with its margin) fronts are the same bit for
+    /// bit. Disjoint near-contact knots: 545 → 486 thousand instructions per query, 18 % less
+    /// time (`docs/performance/cpu-core.md`, eighth sitting). True when `hit` stopped the
+    /// traversal.
+    #[inline(always)]
+    fn paired_steps<const AVX: bool, const RECORD: bool>(
         &mut self,
         sat: &Sat32,
         base: usize,
@@ -1015,14 +1152,185 @@ impl<'a> Ctx<'a> {
         stack: &mut Stack,
         front: &mut Recording<'_>,
         hit: &mut impl FnMut(u32, u32) -> bool,
+    ) -> bool {
+        let (a, b) = (self.a, self.b);
+        let s = sat.s();
+        while stack.pairs.len() > base {
+            let (i, j, p) = stack.pairs.pop().expect("non-empty");
+            stack.placed32.truncate((p >> 2) as usize + 1);
+            if a.nodes[i as usize].is_leaf() && b.nodes[j as usize].is_leaf() {
+                if RECORD {
+                    record_pairs(front, std::iter::once((i, j)));
+                }
+                if self.leaf_pair(i, j, hit) {
+                    if RECORD {
+                        let rest = stack.pairs[base..].iter().map(|&(a, b, _)| (a, b));
+                        record_pairs(front, rest);
+                    }
+                    stack.pairs.truncate(base);
+                    stack.placed32.truncate(pbase);
+                    return true;
+                }
+                continue;
+            }
+            // The entry below, unless it is a leaf pair. Its block is at most the first's, so
+            // the truncation above kept it.
+            let second = match stack.pairs.last() {
+                Some(&(i2, j2, p2)) if stack.pairs.len() > base => {
+                    let leaves = a.nodes[i2 as usize].is_leaf() && b.nodes[j2 as usize].is_leaf();
+                    (!leaves).then_some((i2, j2, p2))
+                }
+                _ => None,
+            };
+            let Some(entry2) = second else {
+                let first = self.step_lanes(sat, stack, (i, j, p));
+                let m = wide::separation4(&first.a, first.b(stack), s, (1 << first.meta.n) - 1);
+                first.meta.push::<RECORD>(stack, front, m);
+                continue;
+            };
+            stack.pairs.pop();
+            let (first, m1, second, m2) =
+                self.paired_test::<AVX, RECORD>(sat, stack, (i, j, p), entry2);
+            // Blocks must not decrease up the stack: the A splits' entries (which name blocks
+            // already there) go first, the second's below the first's, then the B splits'
+            // (new blocks, the first's before the second's).
+            for (step, m) in [(&second, m2), (&first, m1)] {
+                if step.split_a {
+                    step.push::<RECORD>(stack, front, m);
+                }
+            }
+            for (step, m) in [(&first, m1), (&second, m2)] {
+                if !step.split_a {
+                    step.push::<RECORD>(stack, front, m);
+                }
+            }
+        }
+        stack.placed32.truncate(pbase);
+        false
+    }
+
+    /// Both steps of a pair built and tested: in the AVX2 build as one eight-lane test
+    /// ([`wide::avx`]), in the baseline build as two four-lane tests (the same lanes
+    /// separated either way). The first entry's B block, if any, is stored before the second's.
+    #[inline(always)]
+    fn paired_test<const AVX: bool, const MARGINS: bool>(
+        &mut self,
+        sat: &Sat32,
+        stack: &mut Stack,
+        entry1: (u32, u32, u32),
+        entry2: (u32, u32, u32),
+    ) -> (StepMeta, wide::F4, StepMeta, wide::F4) {
+        let s = sat.s();
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: `AVX` is true only in the traversal's AVX2 build, entered only where the
+            // CPU reports AVX2 (`Ctx::new`, `isa::has_avx2`).
+            #[allow(unsafe_code)]
+            unsafe {
+                let (first, h1) = self.step_half(sat, stack, entry1);
+                let (second, h2) = self.step_half(sat, stack, entry2);
+                let active = ((1 << first.n) - 1) | (((1 << second.n) - 1) << 4);
+                let (m1, m2) = wide::avx::separation8::<MARGINS>(&h1, &h2, s, active);
+                return (first, m1, second, m2);
+            }
+        }
+        let first = self.step_lanes(sat, stack, entry1);
+        let second = self.step_lanes(sat, stack, entry2);
+        let m1 = wide::separation4(&first.a, first.b(stack), s, (1 << first.meta.n) - 1);
+        let m2 = wide::separation4(&second.a, second.b(stack), s, (1 << second.meta.n) - 1);
+        (first.meta, m1, second.meta, m2)
+    }
+
+    /// [`Ctx::step_lanes`] for the eight-lane test: the step's lanes as one half, built from
+    /// where they lie.
+    ///
+    /// # Safety
+    ///
+    /// The CPU must have AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    #[allow(unsafe_code)]
+    unsafe fn step_half(
+        &mut self,
+        sat: &Sat32,
+        stack: &mut Stack,
+        (i, j, p): (u32, u32, u32),
+    ) -> (StepMeta, wide::avx::Half) {
+        let (a, b) = (self.a, self.b);
+        let na = &a.nodes[i as usize];
+        let nb = &b.nodes[j as usize];
+        if split_a(na, nb) {
+            let qa_all = a.quads();
+            let qa = qa_all.of[i as usize];
+            let placed = &stack.placed32[(p >> 2) as usize];
+            let k = (p & 3) as usize;
+            // SAFETY (both calls): the caller guarantees AVX2.
+            let (ids, n, half) = if qa != NO_QUAD {
+                let q = &qa_all.quads[(qa >> 2) as usize];
+                (q.ids, (qa & 3) as usize + 1, unsafe {
+                    wide::avx::a_split(q, placed, k)
+                })
+            } else {
+                let (ids, n) = quad_ids(&a.nodes, i);
+                let q = wide::Quad::gather(&a.nodes, &ids, n);
+                (ids, n, unsafe { wide::avx::a_split(&q, placed, k) })
+            };
+            self.counters.box_tests += n as u64;
+            let meta = StepMeta {
+                entry: (i, j, p),
+                split_a: true,
+                ids,
+                n,
+                block: 0,
+            };
+            (meta, half)
+        } else {
+            let qb_all = b.quads();
+            let qb = qb_all.of[j as usize];
+            let (ids, n, lanes) = if qb != NO_QUAD {
+                let q = &qb_all.quads[(qb >> 2) as usize];
+                (q.ids, (qb & 3) as usize + 1, sat.place_quad(q))
+            } else {
+                let (ids, n) = quad_ids(&b.nodes, j);
+                (ids, n, sat.place_lanes(&b.nodes, &ids, n))
+            };
+            self.counters.box_tests += n as u64;
+            self.counters.placements += n as u64;
+            // SAFETY: the caller guarantees AVX2.
+            let half = unsafe { wide::avx::b_split(na, &lanes) };
+            let block = stack.placed32.len() as u32;
+            stack.placed32.push(lanes);
+            let meta = StepMeta {
+                entry: (i, j, p),
+                split_a: false,
+                ids,
+                n,
+                block,
+            };
+            (meta, half)
+        }
+    }
+
+    /// First contact's first steps over the stack above `base` (no front recorded): each step
+    /// pushes its overlapping lanes deepest last ([`ORDERED_STEPS`]), for at most `ordered`
+    /// steps. `Some(true)` when `hit` stopped the traversal, `Some(false)` when the stack is
+    /// done, `None` after `ordered` steps, with the stack as it is for [`Ctx::paired_steps`].
+    /// A loop of its own, so that the paired loop, where the time goes, carries no step count.
+    #[inline(always)]
+    fn ordered_loop(
+        &mut self,
+        sat: &Sat32,
+        base: usize,
+        pbase: usize,
+        stack: &mut Stack,
+        hit: &mut impl FnMut(u32, u32) -> bool,
         mut ordered: u32,
     ) -> Option<bool> {
         let (a, b) = (self.a, self.b);
         let s = sat.s();
         let (qa_all, qb_all) = (a.quads(), b.quads());
         while stack.pairs.len() > base {
-            if ORDERED && ordered == 0 {
-                // The plain loop takes the stack from here.
+            if ordered == 0 {
                 return None;
             }
             let (i, j, p) = stack.pairs.pop().expect("non-empty");
@@ -1030,16 +1338,14 @@ impl<'a> Ctx<'a> {
             let na = &a.nodes[i as usize];
             let nb = &b.nodes[j as usize];
             if na.is_leaf() && nb.is_leaf() {
-                record_pairs(front, std::iter::once((i, j)));
                 if self.leaf_pair(i, j, hit) {
-                    let rest = stack.pairs[base..].iter().map(|&(a, b, _)| (a, b));
-                    record_pairs(front, rest);
                     stack.pairs.truncate(base);
                     stack.placed32.truncate(pbase);
                     return Some(true);
                 }
                 continue;
             }
+            ordered -= 1;
             if split_a(na, nb) {
                 let qa = qa_all.of[i as usize];
                 let (ids, n, lanes) = if qa != NO_QUAD {
@@ -1052,33 +1358,9 @@ impl<'a> Ctx<'a> {
                 self.counters.box_tests += n as u64;
                 let pb = stack.placed32[(p >> 2) as usize].broadcast((p & 3) as usize);
                 let m = wide::separation4(&lanes, &pb, s, (1 << n) - 1);
-                if ORDERED {
-                    ordered -= 1;
-                    let (order, len) = deepest_last(&m, n);
-                    for &k in &order[..len] {
-                        stack.pairs.push((ids[k], j, p));
-                    }
-                    continue;
-                }
-                if front.is_none() {
-                    // Branch-free: every lane written, the overlapping ones kept. Pushed last
-                    // to first: the leftmost lane is expanded first.
-                    let top = stack.pairs.len();
-                    stack.pairs.resize(top + 4, (0, 0, 0));
-                    let mut len = top;
-                    for k in (0..n).rev() {
-                        stack.pairs[len] = (ids[k], j, p);
-                        len += 1 - (m.0[k] > 0.0) as usize;
-                    }
-                    stack.pairs.truncate(len);
-                    continue;
-                }
-                for k in (0..n).rev() {
-                    if m.0[k] > 0.0 {
-                        record_separated(front, ids[k], j, wide::margin64(m.0[k]));
-                    } else {
-                        stack.pairs.push((ids[k], j, p));
-                    }
+                let (order, len) = deepest_last(&m, n);
+                for &k in &order[..len] {
+                    stack.pairs.push((ids[k], j, p));
                 }
             } else {
                 let qb = qb_all.of[j as usize];
@@ -1094,32 +1376,9 @@ impl<'a> Ctx<'a> {
                 let m = wide::separation4(&ALanes::splat(na), &lanes, s, (1 << n) - 1);
                 let block = (stack.placed32.len() as u32) << 2;
                 stack.placed32.push(lanes);
-                if ORDERED {
-                    ordered -= 1;
-                    let (order, len) = deepest_last(&m, n);
-                    for &k in &order[..len] {
-                        stack.pairs.push((i, ids[k], block | k as u32));
-                    }
-                    continue;
-                }
-                if front.is_none() {
-                    // Branch-free, as above; the lanes stay in their block.
-                    let top = stack.pairs.len();
-                    stack.pairs.resize(top + 4, (0, 0, 0));
-                    let mut len = top;
-                    for k in (0..n).rev() {
-                        stack.pairs[len] = (i, ids[k], block | k as u32);
-                        len += 1 - (m.0[k] > 0.0) as usize;
-                    }
-                    stack.pairs.truncate(len);
-                    continue;
-                }
-                for k in (0..n).rev() {
-                    if m.0[k] > 0.0 {
-                        record_separated(front, i, ids[k], wide::margin64(m.0[k]));
-                    } else {
-                        stack.pairs.push((i, ids[k], block | k as u32));
-                    }
+                let (order, len) = deepest_last(&m, n);
+                for &k in &order[..len] {
+                    stack.pairs.push((i, ids[k], block | k as u32));
                 }
             }
         }

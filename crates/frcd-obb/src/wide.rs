@@ -1,8 +1,9 @@
 //! The wide box test of the traversal: one 15-axis separating-axis test run on four box pairs
 //! at once, in four f32 lanes (a plain `[f32; 4]` type the compiler vectorises: SSE on the
 //! x86-64 baseline, AVX in the traversal's AVX2 build chosen at run time (`isa.rs`), NEON on
-//! aarch64; no unsafe code here, no fused multiply-add, so every operation is one IEEE
-//! rounding whichever build runs).
+//! aarch64; no fused multiply-add, so every operation is one IEEE rounding whichever build
+//! runs). The AVX2 build also runs two such tests as one eight-lane test ([`avx`], intrinsics:
+//! the module's only unsafe code), with the same operations in the same order per lane.
 //!
 //! The traversal (`query.rs`) tests one node of one tree against the (up to four) nodes two
 //! levels below a node of the other tree: A's grandchildren against one placed box of B, or
@@ -177,6 +178,27 @@ pub(crate) struct Quad {
 
 const _: () = assert!(std::mem::size_of::<Quad>() == 256);
 
+impl Quad {
+    /// Nodes `ids` (1 to 4) in lanes; unused lanes repeat lane 0.
+    #[inline(always)]
+    pub fn gather(nodes: &[TNode], ids: &[u32; 4], len: usize) -> Quad {
+        let mut q = Quad::default();
+        for k in 0..4 {
+            let id = ids[if k < len { k } else { 0 }];
+            let src = &nodes[id as usize];
+            for i in 0..3 {
+                for x in 0..3 {
+                    q.u[i][x].0[k] = src.u[i][x];
+                }
+                q.h[i].0[k] = src.h[i];
+                q.c[i].0[k] = src.c[i];
+            }
+            q.ids[k] = id;
+        }
+        q
+    }
+}
+
 /// No quad for this node (leaves, odd depth).
 pub(crate) const NO_QUAD: u32 = u32::MAX;
 
@@ -232,21 +254,8 @@ pub(crate) fn build_quads(nodes: &[TNode]) -> Quads {
             continue;
         }
         let (ids, len) = quad_ids(nodes, n as u32);
-        let mut q = Quad::default();
-        for k in 0..4 {
-            let id = ids[if k < len { k } else { 0 }];
-            let src = &nodes[id as usize];
-            for i in 0..3 {
-                for x in 0..3 {
-                    q.u[i][x].0[k] = src.u[i][x];
-                }
-                q.h[i].0[k] = src.h[i];
-                q.c[i].0[k] = src.c[i];
-            }
-            q.ids[k] = id;
-        }
         of[n] = (quads.len() as u32) << 2 | (len as u32 - 1);
-        quads.push(q);
+        quads.push(Quad::gather(nodes, &ids, len));
     }
     // The pushes may have doubled the capacity: keep only what is used.
     quads.shrink_to_fit();
@@ -593,6 +602,247 @@ pub(crate) fn separation4(a: &ALanes, b: &BLanes, s: f32, active: u32) -> F4 {
         }
     }
     best.sub(sv)
+}
+
+/// Two four-lane steps in one eight-lane test, in AVX2 registers (the traversal's AVX2 build,
+/// `query.rs`). Each step's lanes are built as one [`avx::Half`] straight from where they lie (a
+/// quad of A, a broadcast lane of a placed B block, a node of A broadcast, a placed quad of B),
+/// and the test runs the operations of [`separation4`] in the same order on eight lanes, so each
+/// lane is separated exactly when [`separation4`] separates it.
+#[cfg(target_arch = "x86_64")]
+#[allow(unsafe_code)]
+pub(crate) mod avx {
+    use super::{BLanes, C_D, C_H, EPS_R32, F4, Quad};
+    use crate::nodes::TNode;
+    use std::arch::x86_64::*;
+
+    /// The lanes of one step: A's axes and half extents, B's placed axes and half extents, and
+    /// the centre offsets (B's minus A's, formed in f64 and rounded once, as [`super::D4`]'s
+    /// `sub32`).
+    #[derive(Clone, Copy)]
+    pub(crate) struct Half {
+        u: [[__m128; 3]; 3],
+        ha: [__m128; 3],
+        p: [[__m128; 3]; 3],
+        hb: [__m128; 3],
+        d: [__m128; 3],
+    }
+
+    #[inline(always)]
+    fn m128(x: F4) -> __m128 {
+        // SAFETY: `F4` is four f32 in a `repr(C)` array, the layout of `__m128`.
+        unsafe { std::mem::transmute::<F4, __m128>(x) }
+    }
+
+    /// A split: A's lanes from quad `q` (or the same layout gathered), against lane `k` of B's
+    /// placed block in every lane.
+    ///
+    /// # Safety
+    ///
+    /// The CPU must have AVX2 (as for every function here; inlined into the traversal's AVX2
+    /// build, their intrinsics are single instructions: a `#[target_feature]` function would
+    /// not be inlined there).
+    #[inline(always)]
+    pub(crate) unsafe fn a_split(q: &Quad, b: &BLanes, k: usize) -> Half {
+        // SAFETY: the caller guarantees AVX2; `k < 4` indexes the lanes.
+        unsafe {
+            let bc = |x: &F4| _mm_broadcast_ss(&x.0[k]);
+            let mut h = Half {
+                u: [[_mm_setzero_ps(); 3]; 3],
+                ha: [_mm_setzero_ps(); 3],
+                p: [[_mm_setzero_ps(); 3]; 3],
+                hb: [_mm_setzero_ps(); 3],
+                d: [_mm_setzero_ps(); 3],
+            };
+            unroll3!(i => {
+                unroll3!(x => {
+                    h.u[i][x] = m128(q.u[i][x]);
+                    h.p[i][x] = bc(&b.p[i][x]);
+                });
+                h.ha[i] = m128(q.h[i]);
+                h.hb[i] = bc(&b.h[i]);
+                let cb = _mm256_broadcast_sd(&b.c[i].0[k]);
+                h.d[i] = _mm256_cvtpd_ps(_mm256_sub_pd(cb, _mm256_cvtps_pd(m128(q.c[i]))));
+            });
+            h
+        }
+    }
+
+    /// A B split: node `na` of A in every lane, against B's children placed in `b`.
+    ///
+    /// # Safety
+    ///
+    /// The CPU must have AVX2.
+    #[inline(always)]
+    pub(crate) unsafe fn b_split(na: &TNode, b: &BLanes) -> Half {
+        // SAFETY: the caller guarantees AVX2.
+        unsafe {
+            let mut h = Half {
+                u: [[_mm_setzero_ps(); 3]; 3],
+                ha: [_mm_setzero_ps(); 3],
+                p: [[_mm_setzero_ps(); 3]; 3],
+                hb: [_mm_setzero_ps(); 3],
+                d: [_mm_setzero_ps(); 3],
+            };
+            unroll3!(i => {
+                unroll3!(x => {
+                    h.u[i][x] = _mm_broadcast_ss(&na.u[i][x]);
+                    h.p[i][x] = m128(b.p[i][x]);
+                });
+                h.ha[i] = _mm_broadcast_ss(&na.h[i]);
+                h.hb[i] = m128(b.h[i]);
+                let cb = std::mem::transmute::<super::D4, __m256d>(b.c[i]);
+                let ca = _mm256_set1_pd(na.c[i] as f64);
+                h.d[i] = _mm256_cvtpd_ps(_mm256_sub_pd(cb, ca));
+            });
+            h
+        }
+    }
+
+    /// The eight-lane test: `h1` in lanes 0-3, `h2` in lanes 4-7, `active` a mask over the
+    /// eight; the margins of each half. The test runs on until both halves are done, so each
+    /// lane is separated exactly when [`super::separation4`] separates it; with `MARGINS` (a
+    /// front is being recorded) each half's margins are also bit for bit `separation4`'s,
+    /// taken where it would have stopped (after A's faces, after B's faces, or at the end),
+    /// else a half that stopped early may get larger margins (more axes), which is as sound.
+    ///
+    /// # Safety
+    ///
+    /// The CPU must have AVX2.
+    #[inline(always)]
+    pub(crate) unsafe fn separation8<const MARGINS: bool>(
+        h1: &Half,
+        h2: &Half,
+        s: f32,
+        active: u32,
+    ) -> (F4, F4) {
+        // SAFETY: the caller guarantees AVX2.
+        unsafe {
+            let j = |lo: __m128, hi: __m128| _mm256_set_m128(hi, lo);
+            let add = |x, y| _mm256_add_ps(x, y);
+            let sub = |x, y| _mm256_sub_ps(x, y);
+            let mul = |x, y| _mm256_mul_ps(x, y);
+            let sign = _mm256_set1_ps(-0.0);
+            let abs = |x| _mm256_andnot_ps(sign, x);
+            // `vmaxps new, best` keeps `best` where `new` is NaN, as `F4::max` does.
+            let max = |best, new| _mm256_max_ps(new, best);
+            let above = |x, y| _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(x, y)) as u32;
+            let zero = _mm256_setzero_ps();
+            let (mut d, mut ha, mut hb) = ([zero; 3], [zero; 3], [zero; 3]);
+            unroll3!(i => {
+                d[i] = j(h1.d[i], h2.d[i]);
+                ha[i] = j(h1.ha[i], h2.ha[i]);
+                hb[i] = j(h1.hb[i], h2.hb[i]);
+            });
+            let sa = add(add(ha[0], ha[1]), ha[2]);
+            let sb = add(add(hb[0], hb[1]), hb[2]);
+            let sd = add(add(abs(d[0]), abs(d[1])), abs(d[2]));
+            let sv = add(
+                add(
+                    _mm256_set1_ps(s),
+                    mul(_mm256_set1_ps(C_H + EPS_R32), add(sa, sb)),
+                ),
+                mul(_mm256_set1_ps(C_D), sd),
+            );
+            let mut p = [[zero; 3]; 3];
+            unroll3!(k => {
+                unroll3!(x => {
+                    p[k][x] = j(h1.p[k][x], h2.p[k][x]);
+                });
+            });
+            let (mut t, mut r, mut ar) = ([zero; 3], [[zero; 3]; 3], [[zero; 3]; 3]);
+            unroll3!(i => {
+                let u0 = j(h1.u[i][0], h2.u[i][0]);
+                let u1 = j(h1.u[i][1], h2.u[i][1]);
+                let u2 = j(h1.u[i][2], h2.u[i][2]);
+                t[i] = add(add(mul(u0, d[0]), mul(u1, d[1])), mul(u2, d[2]));
+                unroll3!(k => {
+                    r[i][k] = add(add(mul(u0, p[k][0]), mul(u1, p[k][1])), mul(u2, p[k][2]));
+                    ar[i][k] = abs(r[i][k]);
+                });
+            });
+            let halves = |m: __m256| {
+                let f4 = |x: __m128| std::mem::transmute::<__m128, F4>(x);
+                (
+                    f4(_mm256_castps256_ps128(m)),
+                    f4(_mm256_extractf128_ps::<1>(m)),
+                )
+            };
+            let mut best = _mm256_set1_ps(f32::NEG_INFINITY);
+            unroll3!(i => {
+                let rad = add(
+                    add(add(ha[i], mul(hb[0], ar[i][0])), mul(hb[1], ar[i][1])),
+                    mul(hb[2], ar[i][2]),
+                );
+                best = max(best, sub(abs(t[i]), rad));
+            });
+            // Each half's exits, as `separation4` takes them on its own four lanes (only
+            // needed for the margins: the test stops once both halves are done).
+            let (lo, hi) = (active & 0x0f, active & 0xf0);
+            let sep = above(best, sv);
+            if sep & active == active {
+                return halves(sub(best, sv));
+            }
+            let (lo_a, hi_a) = (sep & lo == lo, sep & hi == hi);
+            let after_a = sub(best, sv);
+            unroll3!(k => {
+                let proj = add(add(mul(p[k][0], d[0]), mul(p[k][1], d[1])), mul(p[k][2], d[2]));
+                let rad = add(
+                    add(add(hb[k], mul(ha[0], ar[0][k])), mul(ha[1], ar[1][k])),
+                    mul(ha[2], ar[2][k]),
+                );
+                best = max(best, sub(abs(proj), rad));
+            });
+            let sep = above(best, sv);
+            if !MARGINS && sep & active == active {
+                return halves(sub(best, sv));
+            }
+            let (lo_b, hi_b) = (lo_a || sep & lo == lo, hi_a || sep & hi == hi);
+            let after_b = sub(best, sv);
+            // Where a half stopped early, its margins from then (this half's lanes only).
+            let stopped = |m: __m256| {
+                let (a_lo, a_hi) = halves(after_a);
+                let (b_lo, b_hi) = halves(after_b);
+                let (m_lo, m_hi) = halves(m);
+                let pick = |a: bool, b: bool, xa, xb, xm| {
+                    if a {
+                        xa
+                    } else if b {
+                        xb
+                    } else {
+                        xm
+                    }
+                };
+                (
+                    pick(lo_a, lo_b, a_lo, b_lo, m_lo),
+                    pick(hi_a, hi_b, a_hi, b_hi, m_hi),
+                )
+            };
+            if MARGINS && lo_b && hi_b {
+                return stopped(after_b);
+            }
+            unroll3!(i => {
+                let (i1, i2) = ((i + 1) % 3, (i + 2) % 3);
+                unroll3!(k => {
+                    let (k1, k2) = ((k + 1) % 3, (k + 2) % 3);
+                    let proj = sub(mul(t[i2], r[i1][k]), mul(t[i1], r[i2][k]));
+                    let rad = add(
+                        add(
+                            add(mul(ha[i1], ar[i2][k]), mul(ha[i2], ar[i1][k])),
+                            mul(hb[k1], ar[i][k2]),
+                        ),
+                        mul(hb[k2], ar[i][k1]),
+                    );
+                    best = max(best, sub(abs(proj), rad));
+                });
+            });
+            if MARGINS {
+                stopped(sub(best, sv))
+            } else {
+                halves(sub(best, sv))
+            }
+        }
+    }
 }
 
 /// A lane's margin as the f64 bound the coherence cache stores (`nodes.rs`).
