@@ -1578,8 +1578,9 @@ pub fn collide_cached(
     if use_front {
         let walked = cache.front.len();
         let before = ctx.counters.work();
-        // The walk may spend at most half a fresh traversal: a stale front is abandoned early.
-        let budget = cache.fresh_work / 2;
+        // The walk may spend at most 40 % of a fresh traversal: a stale front is abandoned
+        // early.
+        let budget = 2 * cache.fresh_work / 5;
         let mut hit = hit_fn(first, &mut found, &mut c.pairs);
         let (done, charged) = walk_front(
             &mut ctx,
@@ -1591,10 +1592,11 @@ pub fn collide_cached(
         );
         drop(hit);
         let work = ctx.counters.work() - before + walked as u64 / 8 + charged;
-        if !done || 4 * work > 3 * cache.fresh_work {
-            // The front saved less than a quarter of a fresh traversal's work: drop it and back
-            // off (a walk's work unit costs more time than a fresh wide traversal's, so a
-            // smaller saving did not pay in time: measured on the near-contact knots).
+        if !done || 5 * work > 3 * cache.fresh_work {
+            // The front saved less than 40 % of a fresh traversal's work: drop it and back off
+            // (a walk's work unit costs more time than a fresh wide traversal's, whose paired
+            // steps test two entries at once, so a smaller saving did not pay in time:
+            // measured on the near-contact knots).
             cache.front.clear();
             cache.backoff = (cache.backoff * 2).clamp(1, 64);
             cache.skip = cache.backoff;
