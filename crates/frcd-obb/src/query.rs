@@ -1079,6 +1079,43 @@ impl<'a> Ctx<'a> {
         }
     }
 
+    /// A's nodes two levels below internal node `i`, in lanes (from its quad, or gathered):
+    /// their ids and number, counted as box tests.
+    #[inline(always)]
+    fn a_children(&mut self, i: u32) -> ([u32; 4], usize, ALanes) {
+        let a = self.a;
+        let qa_all = a.quads();
+        let qa = qa_all.of[i as usize];
+        let (ids, n, lanes) = if qa != NO_QUAD {
+            let q = &qa_all.quads[(qa >> 2) as usize];
+            (q.ids, (qa & 3) as usize + 1, ALanes::from_quad(q))
+        } else {
+            let (ids, n) = quad_ids(&a.nodes, i);
+            (ids, n, ALanes::gather(&a.nodes, &ids, n))
+        };
+        self.counters.box_tests += n as u64;
+        (ids, n, lanes)
+    }
+
+    /// B's nodes two levels below internal node `j`, placed in A's frame in lanes (from its
+    /// quad, or gathered): their ids and number, counted as box tests and placements.
+    #[inline(always)]
+    fn b_children(&mut self, sat: &Sat32, j: u32) -> ([u32; 4], usize, BLanes) {
+        let b = self.b;
+        let qb_all = b.quads();
+        let qb = qb_all.of[j as usize];
+        let (ids, n, lanes) = if qb != NO_QUAD {
+            let q = &qb_all.quads[(qb >> 2) as usize];
+            (q.ids, (qb & 3) as usize + 1, sat.place_quad(q))
+        } else {
+            let (ids, n) = quad_ids(&b.nodes, j);
+            (ids, n, sat.place_lanes(&b.nodes, &ids, n))
+        };
+        self.counters.box_tests += n as u64;
+        self.counters.placements += n as u64;
+        (ids, n, lanes)
+    }
+
     /// The lanes of one traversal step on the stack entry `(i, j, p)` (not a leaf pair): the
     /// split node's children two levels down against the other node, counted as box tests
     /// (and placements, where B's children are placed).
@@ -1088,16 +1125,7 @@ impl<'a> Ctx<'a> {
         let na = &a.nodes[i as usize];
         let nb = &b.nodes[j as usize];
         if split_a(na, nb) {
-            let qa_all = a.quads();
-            let qa = qa_all.of[i as usize];
-            let (ids, n, lanes) = if qa != NO_QUAD {
-                let q = &qa_all.quads[(qa >> 2) as usize];
-                (q.ids, (qa & 3) as usize + 1, ALanes::from_quad(q))
-            } else {
-                let (ids, n) = quad_ids(&a.nodes, i);
-                (ids, n, ALanes::gather(&a.nodes, &ids, n))
-            };
-            self.counters.box_tests += n as u64;
+            let (ids, n, lanes) = self.a_children(i);
             let pb = stack.placed32[(p >> 2) as usize].broadcast((p & 3) as usize);
             Step {
                 meta: StepMeta {
@@ -1111,17 +1139,7 @@ impl<'a> Ctx<'a> {
                 b: pb,
             }
         } else {
-            let qb_all = b.quads();
-            let qb = qb_all.of[j as usize];
-            let (ids, n, lanes) = if qb != NO_QUAD {
-                let q = &qb_all.quads[(qb >> 2) as usize];
-                (q.ids, (qb & 3) as usize + 1, sat.place_quad(q))
-            } else {
-                let (ids, n) = quad_ids(&b.nodes, j);
-                (ids, n, sat.place_lanes(&b.nodes, &ids, n))
-            };
-            self.counters.box_tests += n as u64;
-            self.counters.placements += n as u64;
+            let (ids, n, lanes) = self.b_children(sat, j);
             // Stored at once as a new block (a copy of the lanes kept in the step went
             // through memcpy twice). The caller pushes B splits' entries after A splits'.
             let block = stack.placed32.len() as u32;
@@ -1292,17 +1310,7 @@ impl<'a> Ctx<'a> {
             };
             (meta, half)
         } else {
-            let qb_all = b.quads();
-            let qb = qb_all.of[j as usize];
-            let (ids, n, lanes) = if qb != NO_QUAD {
-                let q = &qb_all.quads[(qb >> 2) as usize];
-                (q.ids, (qb & 3) as usize + 1, sat.place_quad(q))
-            } else {
-                let (ids, n) = quad_ids(&b.nodes, j);
-                (ids, n, sat.place_lanes(&b.nodes, &ids, n))
-            };
-            self.counters.box_tests += n as u64;
-            self.counters.placements += n as u64;
+            let (ids, n, lanes) = self.b_children(sat, j);
             // SAFETY: the caller guarantees AVX2.
             let half = unsafe { wide::avx::b_split(na, &lanes) };
             let block = stack.placed32.len() as u32;
@@ -1335,7 +1343,6 @@ impl<'a> Ctx<'a> {
     ) -> Option<bool> {
         let (a, b) = (self.a, self.b);
         let s = sat.s();
-        let (qa_all, qb_all) = (a.quads(), b.quads());
         while stack.pairs.len() > base {
             if ordered == 0 {
                 return None;
@@ -1354,15 +1361,7 @@ impl<'a> Ctx<'a> {
             }
             ordered -= 1;
             if split_a(na, nb) {
-                let qa = qa_all.of[i as usize];
-                let (ids, n, lanes) = if qa != NO_QUAD {
-                    let q = &qa_all.quads[(qa >> 2) as usize];
-                    (q.ids, (qa & 3) as usize + 1, ALanes::from_quad(q))
-                } else {
-                    let (ids, n) = quad_ids(&a.nodes, i);
-                    (ids, n, ALanes::gather(&a.nodes, &ids, n))
-                };
-                self.counters.box_tests += n as u64;
+                let (ids, n, lanes) = self.a_children(i);
                 let pb = stack.placed32[(p >> 2) as usize].broadcast((p & 3) as usize);
                 let m = wide::separation4(&lanes, &pb, s, (1 << n) - 1);
                 let (order, len) = deepest_last(&m, n);
@@ -1370,16 +1369,7 @@ impl<'a> Ctx<'a> {
                     stack.pairs.push((ids[k], j, p));
                 }
             } else {
-                let qb = qb_all.of[j as usize];
-                let (ids, n, lanes) = if qb != NO_QUAD {
-                    let q = &qb_all.quads[(qb >> 2) as usize];
-                    (q.ids, (qb & 3) as usize + 1, sat.place_quad(q))
-                } else {
-                    let (ids, n) = quad_ids(&b.nodes, j);
-                    (ids, n, sat.place_lanes(&b.nodes, &ids, n))
-                };
-                self.counters.box_tests += n as u64;
-                self.counters.placements += n as u64;
+                let (ids, n, lanes) = self.b_children(sat, j);
                 let m = wide::separation4(&ALanes::splat(na), &lanes, s, (1 << n) - 1);
                 let block = (stack.placed32.len() as u32) << 2;
                 stack.placed32.push(lanes);

@@ -628,6 +628,22 @@ pub(crate) mod avx {
         d: [__m128; 3],
     }
 
+    impl Half {
+        /// Every value zero, to be filled lane value by lane value.
+        #[inline(always)]
+        fn zero() -> Half {
+            // SAFETY: SSE, part of every x86-64 target.
+            let z = unsafe { _mm_setzero_ps() };
+            Half {
+                u: [[z; 3]; 3],
+                ha: [z; 3],
+                p: [[z; 3]; 3],
+                hb: [z; 3],
+                d: [z; 3],
+            }
+        }
+    }
+
     #[inline(always)]
     fn m128(x: F4) -> __m128 {
         // SAFETY: `F4` is four f32 in a `repr(C)` array, the layout of `__m128`.
@@ -647,13 +663,7 @@ pub(crate) mod avx {
         // SAFETY: the caller guarantees AVX2; `k < 4` indexes the lanes.
         unsafe {
             let bc = |x: &F4| _mm_broadcast_ss(&x.0[k]);
-            let mut h = Half {
-                u: [[_mm_setzero_ps(); 3]; 3],
-                ha: [_mm_setzero_ps(); 3],
-                p: [[_mm_setzero_ps(); 3]; 3],
-                hb: [_mm_setzero_ps(); 3],
-                d: [_mm_setzero_ps(); 3],
-            };
+            let mut h = Half::zero();
             unroll3!(i => {
                 unroll3!(x => {
                     h.u[i][x] = m128(q.u[i][x]);
@@ -677,13 +687,7 @@ pub(crate) mod avx {
     pub(crate) unsafe fn b_split(na: &TNode, b: &BLanes) -> Half {
         // SAFETY: the caller guarantees AVX2.
         unsafe {
-            let mut h = Half {
-                u: [[_mm_setzero_ps(); 3]; 3],
-                ha: [_mm_setzero_ps(); 3],
-                p: [[_mm_setzero_ps(); 3]; 3],
-                hb: [_mm_setzero_ps(); 3],
-                d: [_mm_setzero_ps(); 3],
-            };
+            let mut h = Half::zero();
             unroll3!(i => {
                 unroll3!(x => {
                     h.u[i][x] = _mm_broadcast_ss(&na.u[i][x]);
