@@ -519,6 +519,17 @@ struct PlacedTriangle {
 }
 
 impl PlacedTriangle {
+    /// A placeholder, overwritten before use.
+    const EMPTY: PlacedTriangle = PlacedTriangle {
+        tri: Triangle {
+            v: [DVec3::ZERO; 3],
+        },
+        aabb: Aabb {
+            min: DVec3::ZERO,
+            max: DVec3::ZERO,
+        },
+    };
+
     #[inline(always)]
     fn new(tri: Triangle) -> Self {
         PlacedTriangle {
@@ -611,6 +622,8 @@ struct Stack {
     pairs: Vec<(u32, u32, u32)>,
     placed: Vec<Placed>,
     placed32: Vec<BLanes>,
+    /// B leaves already placed by the query that holds the stack.
+    leaves: PlacedLeaves,
 }
 
 impl Stack {
@@ -619,7 +632,55 @@ impl Stack {
             pairs: Vec::with_capacity(64),
             placed: Vec::with_capacity(64),
             placed32: Vec::with_capacity(64),
+            leaves: PlacedLeaves::default(),
         }
+    }
+}
+
+/// B's leaves of one or two triangles placed in A's frame (triangles and boxes) by one query,
+/// direct-mapped by node index ([`PLACED_LEAF_SLOTS`] slots): a leaf met again is read back
+/// instead of fetched and placed again. Depth-first, the A leaves below one node meet the same
+/// B leaves one after another: on the dense sweep's all pairs 558 of 828 leaf pairs per query
+/// found their B leaf here (67 %), on the near-contact knots 110 of 174.
+///
+/// A slot's tag is `generation << 32 | node`; the generation changes with every query
+/// ([`PlacedLeaves::next_query`]), so no query reads another's placements (they are in
+/// another frame).
+#[derive(Default)]
+struct PlacedLeaves {
+    /// Empty until a query first meets a leaf pair (then [`PLACED_LEAF_SLOTS`] entries).
+    tags: Vec<u64>,
+    tris: Vec<[PlacedTriangle; 2]>,
+    generation: u32,
+}
+
+/// Slots of [`PlacedLeaves`]: 256 (62 KB); 4,096 found 4 more leaves per dense query.
+const PLACED_LEAF_SLOTS: usize = 256;
+
+impl PlacedLeaves {
+    /// Forgets every placement (a new query: a new frame).
+    fn next_query(&mut self) {
+        self.generation = self.generation.wrapping_add(1);
+        if self.generation == 0 {
+            // Tags of the generation 2^32 queries ago could match again: clear them.
+            self.tags.fill(0);
+            self.generation = 1;
+        }
+    }
+
+    /// Leaf `node`'s slot and whether it holds the node's placed triangles; on a miss the
+    /// slot is claimed for the node (the caller fills it).
+    #[inline(always)]
+    fn slot(&mut self, node: u32) -> (&mut [PlacedTriangle; 2], bool) {
+        if self.tags.is_empty() {
+            self.tags = vec![0; PLACED_LEAF_SLOTS];
+            self.tris = vec![[PlacedTriangle::EMPTY; 2]; PLACED_LEAF_SLOTS];
+        }
+        let k = node as usize % PLACED_LEAF_SLOTS;
+        let tag = (u64::from(self.generation) << 32) | u64::from(node);
+        let found = self.tags[k] == tag;
+        self.tags[k] = tag;
+        (&mut self.tris[k], found)
     }
 }
 
@@ -638,11 +699,13 @@ struct PooledStack(Stack);
 impl PooledStack {
     fn take() -> Self {
         let stack = STACK.try_with(|c| c.take()).unwrap_or_default();
-        PooledStack(if stack.pairs.capacity() == 0 {
+        let mut stack = if stack.pairs.capacity() == 0 {
             Stack::new()
         } else {
             stack
-        })
+        };
+        stack.leaves.next_query();
+        PooledStack(stack)
     }
 }
 
@@ -854,15 +917,36 @@ impl<'a> Ctx<'a> {
     /// returns `true`. Each triangle is fetched from its mesh, placed and boxed once per leaf
     /// pair, not once per triangle pair (the same values, so the same answers).
     #[inline]
-    fn leaf_pair(&mut self, i: u32, j: u32, hit: &mut impl FnMut(u32, u32) -> bool) -> bool {
+    fn leaf_pair(
+        &mut self,
+        leaves: &mut PlacedLeaves,
+        i: u32,
+        j: u32,
+        hit: &mut impl FnMut(u32, u32) -> bool,
+    ) -> bool {
         let tas = self.a.node_triangles(i);
         let tbs = self.b.node_triangles(j);
-        // One instance per B leaf size up to four (the default leaf holds two), so the placed
-        // triangles live in an array of exactly that size (nothing to fill first).
-        if let Ok(tbs) = <&[u32; 2]>::try_from(tbs) {
-            self.placed_leaf_pair(tas, tbs, hit)
-        } else if let Ok(tbs) = <&[u32; 1]>::try_from(tbs) {
-            self.placed_leaf_pair(tas, tbs, hit)
+        // Leaves of one or two triangles (the default leaf holds two) go through `leaves`;
+        // larger ones get one instance per size up to four, so the placed triangles live in
+        // an array of exactly that size.
+        if tbs.len() <= 2 {
+            let (placed, found) = leaves.slot(j);
+            if !found {
+                for (p, &tb) in placed.iter_mut().zip(tbs) {
+                    *p = PlacedTriangle::new(self.frame.triangle(&self.b.triangle(tb)));
+                }
+            }
+            let placed = &placed[..tbs.len()];
+            let a = self.a;
+            for &ta in tas {
+                let t1 = PlacedTriangle::new(a.triangle(ta));
+                for (t2, &tb) in placed.iter().zip(tbs) {
+                    if self.placed_tri_pair(&t1, t2) && hit(ta, tb) {
+                        return true;
+                    }
+                }
+            }
+            false
         } else if let Ok(tbs) = <&[u32; 3]>::try_from(tbs) {
             self.placed_leaf_pair(tas, tbs, hit)
         } else if let Ok(tbs) = <&[u32; 4]>::try_from(tbs) {
@@ -889,8 +973,12 @@ impl<'a> Ctx<'a> {
         hit: &mut impl FnMut(u32, u32) -> bool,
     ) -> bool {
         let (a, b) = (self.a, self.b);
-        let placed: [PlacedTriangle; N] =
-            std::array::from_fn(|k| PlacedTriangle::new(self.frame.triangle(&b.triangle(tbs[k]))));
+        // A plain loop over a filled array: `array::from_fn` kept its closure out of line
+        // (a call and a copy of the result per triangle).
+        let mut placed = [PlacedTriangle::EMPTY; N];
+        for (p, &tb) in placed.iter_mut().zip(tbs) {
+            *p = PlacedTriangle::new(self.frame.triangle(&b.triangle(tb)));
+        }
         for &ta in tas {
             let t1 = PlacedTriangle::new(a.triangle(ta));
             for (t2, &tb) in placed.iter().zip(tbs) {
@@ -948,7 +1036,7 @@ impl<'a> Ctx<'a> {
             }
             if self.both_leaves(i, j) {
                 record_pairs(&mut front, std::iter::once((i, j)));
-                if self.leaf_pair(i, j, hit) {
+                if self.leaf_pair(&mut stack.leaves, i, j, hit) {
                     let rest = stack.pairs[base..].iter().map(|&(a, b, _)| (a, b));
                     record_pairs(&mut front, rest);
                     stack.pairs.truncate(base);
@@ -1187,7 +1275,7 @@ impl<'a> Ctx<'a> {
                 if RECORD {
                     record_pairs(front, std::iter::once((i, j)));
                 }
-                if self.leaf_pair(i, j, hit) {
+                if self.leaf_pair(&mut stack.leaves, i, j, hit) {
                     if RECORD {
                         let rest = stack.pairs[base..].iter().map(|&(a, b, _)| (a, b));
                         record_pairs(front, rest);
@@ -1352,7 +1440,7 @@ impl<'a> Ctx<'a> {
             let na = &a.nodes[i as usize];
             let nb = &b.nodes[j as usize];
             if na.is_leaf() && nb.is_leaf() {
-                if self.leaf_pair(i, j, hit) {
+                if self.leaf_pair(&mut stack.leaves, i, j, hit) {
                     stack.pairs.truncate(base);
                     stack.placed32.truncate(pbase);
                     return Some(true);
@@ -1444,9 +1532,52 @@ pub fn containment(a: &ObbTree, pose_a: &Pose, b: &ObbTree, pose_b: &Pose) -> Op
     ctx.containment(true)
 }
 
+/// Sorts triangle pairs ascending (by A's triangle, then B's), on one `u64` key per pair.
+/// Long lists (a dense overlap's hundreds of pairs) take a least-significant-digit radix sort
+/// over the key bytes some pair uses (stable passes of 256 buckets): on the dense sweep's all
+/// pairs (about 590 pairs) it saved 36 thousand of the query's 2.6 million instructions
+/// against the comparison sort, which short lists keep.
+fn sort_pairs(pairs: &mut [(u32, u32)]) {
+    let key = |&(a, b): &(u32, u32)| (u64::from(a) << 32) | u64::from(b);
+    if pairs.len() < RADIX_MIN_PAIRS {
+        pairs.sort_unstable_by_key(key);
+        return;
+    }
+    let mut keys: Vec<u64> = pairs.iter().map(key).collect();
+    let mut spare = vec![0u64; keys.len()];
+    // Bytes where no key has a set bit are zero everywhere: nothing to sort there.
+    let used = keys.iter().fold(0u64, |m, &k| m | k);
+    for shift in (0..64).step_by(8) {
+        if (used >> shift) & 0xff == 0 {
+            continue;
+        }
+        let mut start = [0usize; 256];
+        for &k in &keys {
+            start[((k >> shift) & 0xff) as usize] += 1;
+        }
+        let mut sum = 0;
+        for s in start.iter_mut() {
+            (*s, sum) = (sum, sum + *s);
+        }
+        for &k in &keys {
+            let d = ((k >> shift) & 0xff) as usize;
+            spare[start[d]] = k;
+            start[d] += 1;
+        }
+        std::mem::swap(&mut keys, &mut spare);
+    }
+    for (p, k) in pairs.iter_mut().zip(keys) {
+        *p = ((k >> 32) as u32, k as u32);
+    }
+}
+
+/// From this many pairs on, [`sort_pairs`] takes the radix sort (below, its fixed cost of
+/// 256 buckets per pass outweighs the comparisons it saves).
+const RADIX_MIN_PAIRS: usize = 128;
+
 fn finish(ctx: &Ctx<'_>, request: &Request, mut c: Collision) -> Collision {
     if request.mode == Mode::AllPairs {
-        c.pairs.sort_unstable();
+        sort_pairs(&mut c.pairs);
         c.witness = c.pairs.first().copied();
     }
     c.collide = c.witness.is_some();
@@ -2212,6 +2343,90 @@ mod walk_tests {
                 "query {k}: the pooled stack lost its buffers"
             );
         }
+    }
+
+    /// The radix sort of long pair lists gives the comparison sort's order, on lists with
+    /// repeated A triangles, high bits set on either side, and lengths about its threshold.
+    #[test]
+    fn pair_sort_matches_the_comparison_sort() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+        for len in [0, 1, 2, RADIX_MIN_PAIRS - 1, RADIX_MIN_PAIRS, 600, 5_000] {
+            for range in [4u32, 70_000, u32::MAX] {
+                let mut pairs: Vec<(u32, u32)> = (0..len)
+                    .map(|_| (rng.random_range(0..=range), rng.random_range(0..=range)))
+                    .collect();
+                let mut expected = pairs.clone();
+                expected.sort_unstable();
+                sort_pairs(&mut pairs);
+                assert_eq!(pairs, expected, "{len} pairs below {range}");
+            }
+        }
+    }
+
+    /// Placed B leaves are reused within a query only: on one thread, queries of the same
+    /// trees at poses that alternate between nearby frames (so the same B leaves are met
+    /// again in another frame) give the oracle's pairs every time, on both leaf sizes that go
+    /// through the placed-leaf slots and on leaves too large for them.
+    #[test]
+    fn placed_leaves_never_cross_queries() {
+        let ma = shapes::icosphere(1.0, 3);
+        let mb = shapes::icosphere(0.7, 3);
+        for leaf in [1, 2, 4] {
+            let opts = BuildOptions {
+                max_leaf_triangles: leaf,
+                ..BuildOptions::default()
+            };
+            let (ta, tb) = (ObbTree::build(&ma, &opts), ObbTree::build(&mb, &opts));
+            let all = Request {
+                mode: Mode::AllPairs,
+                ..Request::default()
+            };
+            let mut cache = PairCache::new();
+            for k in 0..12 {
+                let angle = if k % 2 == 0 {
+                    0.0
+                } else {
+                    0.3 + 0.01 * k as f64
+                };
+                let pb = Pose::new(
+                    DVec3::new(1.2 + 0.02 * (k % 3) as f64, 0.1, 0.0),
+                    DQuat::from_rotation_z(angle),
+                );
+                let truth = crate::oracle::pairs(&ma, &Pose::IDENTITY, &mb, &pb);
+                assert!(!truth.is_empty());
+                let plain = collide(&ta, &Pose::IDENTITY, &tb, &pb, &all);
+                assert_eq!(plain.pairs, truth, "leaf {leaf}, query {k}");
+                let cached = collide_cached(&ta, &Pose::IDENTITY, &tb, &pb, &all, &mut cache);
+                assert_eq!(cached.pairs, truth, "leaf {leaf}, cached query {k}");
+            }
+        }
+    }
+
+    /// When the query generation wraps, the slots of the generation 2^32 queries back are
+    /// cleared, so a stale tag cannot match.
+    #[test]
+    fn placed_leaf_generation_wraps_without_stale_hits() {
+        let mut leaves = PlacedLeaves::default();
+        leaves.next_query();
+        assert!(!leaves.slot(5).1, "empty slots hold nothing");
+        assert!(leaves.slot(5).1, "the same query finds its placement");
+        leaves.next_query();
+        assert!(!leaves.slot(5).1, "the next query does not");
+        // The last generation before the wrap tags a slot; the wrap comes back as
+        // generation 1 with every tag cleared, so the slot is empty when generation
+        // u32::MAX comes round again.
+        leaves.generation = u32::MAX;
+        assert!(!leaves.slot(7).1);
+        assert!(leaves.slot(7).1);
+        leaves.next_query();
+        assert_eq!(leaves.generation, 1);
+        assert!(
+            leaves.tags.iter().all(|&t| t == 0),
+            "a wrap clears the tags"
+        );
+        leaves.generation = u32::MAX;
+        assert!(!leaves.slot(7).1, "no stale hit after the wrap");
     }
 
     /// A front whose expired pairs alone would cost more than the budget is not walked at
