@@ -921,8 +921,10 @@ impl<'a> Ctx<'a> {
     }
 
     /// Tests the triangles of a leaf pair; calls `hit` on each touching pair, stops when it
-    /// returns `true`. Each triangle is fetched from its mesh, placed and boxed once per leaf
-    /// pair, not once per triangle pair (the same values, so the same answers).
+    /// returns `true`. Each triangle is fetched from its mesh, placed and boxed once per query
+    /// where its leaf holds one or two triangles (kept in `leaves` for B, `a_leaves` for A,
+    /// see [`PlacedLeaves`]), else once per leaf pair; never once per triangle pair. The same
+    /// operations on the same values either way, so the same answers.
     #[inline]
     fn leaf_pair(
         &mut self,
