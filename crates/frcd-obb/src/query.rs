@@ -960,15 +960,10 @@ impl<'a> Ctx<'a> {
                         return true;
                     }
                 }
+                false
             } else {
-                for &ta in tas {
-                    let t1 = PlacedTriangle::new(a.triangle(ta));
-                    if self.triangle_row(ta, &t1, placed, tbs, hit) {
-                        return true;
-                    }
-                }
+                self.fetched_rows(tas, placed, tbs, hit)
             }
-            false
         } else if let Ok(tbs) = <&[u32; 3]>::try_from(tbs) {
             self.placed_leaf_pair(tas, tbs, hit)
         } else if let Ok(tbs) = <&[u32; 4]>::try_from(tbs) {
@@ -984,6 +979,26 @@ impl<'a> Ctx<'a> {
             }
             false
         }
+    }
+
+    /// A's triangles `tas`, each fetched and boxed here, against B's placed triangles of one
+    /// leaf ([`Ctx::triangle_row`] each); true when `hit` stops the traversal.
+    #[inline(always)]
+    fn fetched_rows(
+        &mut self,
+        tas: &[u32],
+        placed: &[PlacedTriangle],
+        tbs: &[u32],
+        hit: &mut impl FnMut(u32, u32) -> bool,
+    ) -> bool {
+        let a = self.a;
+        for &ta in tas {
+            let t1 = PlacedTriangle::new(a.triangle(ta));
+            if self.triangle_row(ta, &t1, placed, tbs, hit) {
+                return true;
+            }
+        }
+        false
     }
 
     /// A's triangle `ta` (boxed, `t1`) against B's placed triangles of one leaf; calls `hit`
@@ -1013,22 +1028,14 @@ impl<'a> Ctx<'a> {
         tbs: &[u32; N],
         hit: &mut impl FnMut(u32, u32) -> bool,
     ) -> bool {
-        let (a, b) = (self.a, self.b);
+        let b = self.b;
         // A plain loop over a filled array: `array::from_fn` kept its closure out of line
         // (a call and a copy of the result per triangle).
         let mut placed = [PlacedTriangle::EMPTY; N];
         for (p, &tb) in placed.iter_mut().zip(tbs) {
             *p = PlacedTriangle::new(self.frame.triangle(&b.triangle(tb)));
         }
-        for &ta in tas {
-            let t1 = PlacedTriangle::new(a.triangle(ta));
-            for (t2, &tb) in placed.iter().zip(tbs) {
-                if self.placed_tri_pair(&t1, t2) && hit(ta, tb) {
-                    return true;
-                }
-            }
-        }
-        false
+        self.fetched_rows(tas, &placed, tbs, hit)
     }
 
     /// Depth-first traversal below (and including) node pair `(i, j)`. Appends the pairs where
