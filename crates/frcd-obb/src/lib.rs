@@ -11,7 +11,8 @@
 //!   A's frame with a conservative 15-axis SAT (rounding can only keep a box pair), a hybrid
 //!   top volume (sphere, AABB, root OBB), optional intersection segments and solid-mode
 //!   containment;
-//! - [`collide_cached`] with a caller-owned [`PairCache`]: witness pair, then a traversal front
+//! - [`collide_cached`] with a caller-owned [`PairCache`]: witness pair, its neighbourhood
+//!   (first contact, coherent motion), then a traversal front
 //!   whose separated pairs keep their margins against a bound on the motion (no test while the
 //!   margin holds), with a work budget that falls back to a fresh traversal; same answers as
 //!   [`collide`];

@@ -347,7 +347,10 @@ fn deepest_last(m: &wide::F4, n: usize) -> ([usize; 4], usize) {
 
 /// Caller-owned frame-to-frame state for [`collide_cached`] on one pair of trees.
 ///
-/// Holds the last witness triangle pair (tested first in [`Mode::FirstContact`]) and the
+/// Holds the last witness triangle pair (tested first in [`Mode::FirstContact`]) with the leaf
+/// pair that held it (when that pair no longer touches and the bodies moved by at most a tenth
+/// of the smaller one's bounding radius, the subtree pair four levels above those leaves is
+/// searched before the whole trees) and the
 /// traversal front of the last traversal: the node pairs where it stopped, each separated pair
 /// with its separation margin. Between queries the cache bounds how far any point of B moved
 /// in A's frame (`|Δt| + ‖ΔM‖₂ · r_v`, `r_v` the largest vertex distance from B's origin,
@@ -1730,9 +1733,11 @@ pub fn collide_cached(
     let mut ctx = Ctx::new(a, pose_a, b, pose_b, request.method);
     cache.bind(a, b, &ctx.frame);
     let mut c = Collision::default();
-    // Cheap rejections first: the top volume, then (first contact) the old witness pair.
+    // Cheap rejections first: the top volume, then (first contact) the old witness pair and
+    // its neighbourhood.
     if ctx.top_rejects(request.top_volume) {
         cache.witness = None;
+        cache.witness_leaves = None;
         c.counters = ctx.counters;
         return c;
     }
