@@ -1762,19 +1762,22 @@ pub fn collide_cached(
     // query: after larger motion (random poses, teleports) every margin has expired, so the
     // cache neither walks nor records a front.
     let coherent = cache.delta <= 0.1 * a.sphere.radius.min(b.sphere.radius);
+    let mut searched_all = false;
     if first && coherent {
         if let Some((la, lb)) = cache.witness_leaves {
             // Where the bodies touched a moment ago they most likely touch now: the subtrees a
             // few levels above the old witness's leaves first, the whole trees only if they
-            // hold no touching pair (their pairs are then tested again: a capped loss).
+            // hold no touching pair (their pairs are then tested again: a capped loss). In
+            // trees shallower than that the neighbourhood is the whole trees.
             let na = ancestor(&a.nodes, la, NEIGHBOURHOOD_LEVELS);
             let nb = ancestor(&b.nodes, lb, NEIGHBOURHOOD_LEVELS);
             let mut stack = PooledStack::take();
             let mut hit = hit_fn(true, &mut found, &mut c.pairs);
             ctx.descend(na, nb, &mut stack, None, &mut hit);
+            searched_all = (na, nb) == (0, 0);
         }
     }
-    if found.is_none() {
+    if found.is_none() && !searched_all {
         let mut use_front = coherent && !cache.front.is_empty() && cache.skip == 0;
         if use_front {
             let walked = cache.front.len();
@@ -2612,6 +2615,46 @@ mod walk_tests {
         }
         // The primed query tested the neighbourhood (in vain) before the whole trees.
         assert!(box_tests[1] > box_tests[0], "{box_tests:?}");
+    }
+
+    /// In trees shallower than the neighbourhood's levels the neighbourhood is the whole trees:
+    /// when the contact ends, the query answers from that one search (no second traversal).
+    #[test]
+    fn witness_neighbourhood_of_shallow_trees_is_searched_once() {
+        // B, a smaller cube, crosses A's face by 0.01, then moves 0.02 inward (a coherent
+        // move): inside A without touching it, so no top volume can reject the pair and the
+        // traversal must prove it.
+        let (ma, mb) = (
+            shapes::cuboid(DVec3::splat(0.5)),
+            shapes::cuboid(DVec3::splat(0.3)),
+        );
+        let ta = ObbTree::build(&ma, &BuildOptions::default());
+        let tb = ObbTree::build(&mb, &BuildOptions::default());
+        for t in [&ta, &tb] {
+            for n in 0..t.nodes.len() as u32 {
+                if t.nodes[n as usize].is_leaf() {
+                    assert_eq!(ancestor(&t.nodes, n, NEIGHBOURHOOD_LEVELS), 0, "leaf {n}");
+                }
+            }
+        }
+        let first = Request::default();
+        let mut cache = PairCache::new();
+        let touching = Pose::from_translation(DVec3::new(0.21, 0.02, 0.01));
+        let inside = Pose::from_translation(DVec3::new(0.19, 0.02, 0.01));
+        let c = collide_cached(&ta, &Pose::IDENTITY, &tb, &touching, &first, &mut cache);
+        assert!(c.collide && cache.witness_leaves.is_some());
+        let plain = collide(&ta, &Pose::IDENTITY, &tb, &inside, &first);
+        let c = collide_cached(&ta, &Pose::IDENTITY, &tb, &inside, &first, &mut cache);
+        assert!(!plain.collide && !c.collide);
+        assert!(plain.counters.box_tests > 1, "the traversal ran");
+        assert!(cache.witness_leaves.is_none());
+        // One traversal's work, not two.
+        assert!(
+            c.counters.box_tests <= plain.counters.box_tests,
+            "{} against {}",
+            c.counters.box_tests,
+            plain.counters.box_tests
+        );
     }
 
     /// On a coherent sweep through a deep overlap the old witness pair often stops touching,
