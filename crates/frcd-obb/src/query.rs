@@ -1778,68 +1778,15 @@ pub fn collide_cached(
         }
     }
     if found.is_none() && !searched_all {
-        let mut use_front = coherent && !cache.front.is_empty() && cache.skip == 0;
-        if use_front {
-            let walked = cache.front.len();
-            let before = ctx.counters.work();
-            // The walk may spend at most 40 % of a fresh traversal: a stale front is abandoned
-            // early.
-            let budget = 2 * cache.fresh_work / 5;
-            let mut hit = hit_fn(first, &mut found, &mut c.pairs);
-            let (done, charged) = walk_front(
-                &mut ctx,
-                &mut cache.front,
-                &mut cache.scratch,
-                cache.clock,
-                budget,
-                &mut hit,
-            );
-            drop(hit);
-            let work = ctx.counters.work() - before + walked as u64 / 8 + charged;
-            if !done || 5 * work > 3 * cache.fresh_work {
-                // The front saved less than 40 % of a fresh traversal's work: drop it and back off
-                // (a walk's work unit costs more time than a fresh wide traversal's, whose paired
-                // steps test two entries at once, so a smaller saving did not pay in time:
-                // measured on the near-contact knots).
-                cache.front.clear();
-                cache.backoff = (cache.backoff * 2).clamp(1, 64);
-                cache.skip = cache.backoff;
-            } else {
-                cache.backoff = 0;
-            }
-            if !done {
-                // Abandoned half way: start again from the root (the pairs found so far would be
-                // found again).
-                c.pairs.clear();
-                found = None;
-                use_front = false;
-            }
-        }
-        if !use_front {
-            cache.skip = cache.skip.saturating_sub(1);
-            // Record a front only when the next query will try it.
-            let record = coherent && cache.skip == 0 && !was_touching;
-            let mut front = std::mem::take(&mut cache.front);
-            front.clear();
-            let before = ctx.counters.work();
-            let mut stack = PooledStack::take();
-            let mut hit = hit_fn(first, &mut found, &mut c.pairs);
-            ctx.descend(
-                0,
-                0,
-                &mut stack,
-                record.then_some((&mut front, cache.clock)),
-                &mut hit,
-            );
-            // A running mean: a first-contact traversal's work varies with where the hit is.
-            let work = ctx.counters.work() - before;
-            cache.fresh_work = if cache.fresh_work == 0 {
-                work
-            } else {
-                (3 * cache.fresh_work + work) / 4
-            };
-            cache.front = front;
-        }
+        walk_or_traverse(
+            &mut ctx,
+            cache,
+            first,
+            coherent,
+            was_touching,
+            &mut found,
+            &mut c.pairs,
+        );
     }
     if first {
         c.witness = found;
@@ -1847,6 +1794,82 @@ pub fn collide_cached(
         cache.witness_leaves = found.map(|_| ctx.last_leaves);
     }
     finish(&ctx, request, c)
+}
+
+/// The front walk or a fresh traversal of a cached query ([`collide_cached`], after its cheap
+/// rejections), under the cache's work budget and back-off: fills `found` (first contact) or
+/// `pairs` (all pairs), records the next front where the next query will try it.
+fn walk_or_traverse(
+    ctx: &mut Ctx<'_>,
+    cache: &mut PairCache,
+    first: bool,
+    coherent: bool,
+    was_touching: bool,
+    found: &mut Option<(u32, u32)>,
+    pairs: &mut Vec<(u32, u32)>,
+) {
+    let mut use_front = coherent && !cache.front.is_empty() && cache.skip == 0;
+    if use_front {
+        let walked = cache.front.len();
+        let before = ctx.counters.work();
+        // The walk may spend at most 40 % of a fresh traversal: a stale front is abandoned
+        // early.
+        let budget = 2 * cache.fresh_work / 5;
+        let mut hit = hit_fn(first, found, pairs);
+        let (done, charged) = walk_front(
+            ctx,
+            &mut cache.front,
+            &mut cache.scratch,
+            cache.clock,
+            budget,
+            &mut hit,
+        );
+        drop(hit);
+        let work = ctx.counters.work() - before + walked as u64 / 8 + charged;
+        if !done || 5 * work > 3 * cache.fresh_work {
+            // The front saved less than 40 % of a fresh traversal's work: drop it and back off
+            // (a walk's work unit costs more time than a fresh wide traversal's, whose paired
+            // steps test two entries at once, so a smaller saving did not pay in time:
+            // measured on the near-contact knots).
+            cache.front.clear();
+            cache.backoff = (cache.backoff * 2).clamp(1, 64);
+            cache.skip = cache.backoff;
+        } else {
+            cache.backoff = 0;
+        }
+        if !done {
+            // Abandoned half way: start again from the root (the pairs found so far would be
+            // found again).
+            pairs.clear();
+            *found = None;
+            use_front = false;
+        }
+    }
+    if !use_front {
+        cache.skip = cache.skip.saturating_sub(1);
+        // Record a front only when the next query will try it.
+        let record = coherent && cache.skip == 0 && !was_touching;
+        let mut front = std::mem::take(&mut cache.front);
+        front.clear();
+        let before = ctx.counters.work();
+        let mut stack = PooledStack::take();
+        let mut hit = hit_fn(first, found, pairs);
+        ctx.descend(
+            0,
+            0,
+            &mut stack,
+            record.then_some((&mut front, cache.clock)),
+            &mut hit,
+        );
+        // A running mean: a first-contact traversal's work varies with where the hit is.
+        let work = ctx.counters.work() - before;
+        cache.fresh_work = if cache.fresh_work == 0 {
+            work
+        } else {
+            (3 * cache.fresh_work + work) / 4
+        };
+        cache.front = front;
+    }
 }
 
 /// How many levels above the old witness's leaves a coherent cached first-contact query
@@ -2485,8 +2508,8 @@ mod walk_tests {
     /// Placed leaves are reused within a query only: on one thread, queries at poses that
     /// alternate between nearby frames (so the same B leaves are met again in another frame),
     /// with A alternating between two trees of nearly the same shape (so the same A node
-    /// indices are met again with other triangles), give the oracle's pairs every time, on both leaf
-    /// sizes that go through the slots and on leaves too large for them.
+    /// indices are met again with other triangles), give the oracle's pairs every time, on
+    /// both leaf sizes that go through the slots and on leaves too large for them.
     #[test]
     fn placed_leaves_never_cross_queries() {
         let ma = [shapes::icosphere(1.0, 3), shapes::icosphere(1.04, 3)];
@@ -2525,8 +2548,6 @@ mod walk_tests {
         }
     }
 
-    /// When the query generation wraps, the slots of the generation 2^32 queries back are
-    /// cleared, so a stale tag cannot match.
     /// `ancestor` follows the parent links: checked against parents collected from the
     /// children links, for every node and every number of levels (past the root too, and past
     /// the seven it caps them at), and it answers the root for an id past the last node.
@@ -2659,8 +2680,8 @@ mod walk_tests {
 
     /// On a coherent sweep through a deep overlap the old witness pair often stops touching,
     /// and its neighbourhood then finds the next contact with at most three quarters of the
-    /// work of a traversal from the roots (time-free counts: box tests, placements and triangle tests),
-    /// with a touching witness at every step.
+    /// work of a traversal from the roots (time-free counts: box tests, placements and
+    /// triangle tests), with a touching witness at every step.
     #[test]
     fn witness_neighbourhood_finds_contact_with_less_work() {
         let ma = shapes::icosphere(1.0, 4);
@@ -2706,6 +2727,8 @@ mod walk_tests {
         );
     }
 
+    /// When the query generation wraps, the slots of the generation 2^32 queries back are
+    /// cleared, so a stale tag cannot match.
     #[test]
     fn placed_leaf_generation_wraps_without_stale_hits() {
         let mut leaves = PlacedLeaves::default();
