@@ -1140,8 +1140,9 @@ mod tests {
                 upload: 1.0,
             })
             .collect();
-        let path =
-            std::env::temp_dir().join(format!("frcd-xtask-gpgpu-{}.svg", std::process::id()));
+        let path = crate::plot::TempFile(
+            std::env::temp_dir().join(format!("frcd-xtask-gpgpu-{}.svg", std::process::id())),
+        );
         plot(&path, &rows, 2, "test adapter").unwrap();
         let svg = std::fs::read_to_string(&path).unwrap();
         for s in [

@@ -415,8 +415,9 @@ mod tests {
             row("grid", "cpu", "exact", 40.0, 0.0),
             row("grid", "gpgpu", "exact", 300.0, 0.0),
         ];
-        let path =
-            std::env::temp_dir().join(format!("frcd-xtask-hybrid-{}.svg", std::process::id()));
+        let path = crate::plot::TempFile(
+            std::env::temp_dir().join(format!("frcd-xtask-hybrid-{}.svg", std::process::id())),
+        );
         plot(&path, &rows, "test adapter").unwrap();
         let svg = std::fs::read_to_string(&path).unwrap();
         for s in ["bogie", "grid", "image fast", "gpgpu exact", "test adapter"] {

@@ -458,8 +458,9 @@ mod tests {
                 });
             }
         }
-        let path =
-            std::env::temp_dir().join(format!("frcd-xtask-image-{}.svg", std::process::id()));
+        let path = crate::plot::TempFile(
+            std::env::temp_dir().join(format!("frcd-xtask-image-{}.svg", std::process::id())),
+        );
         plot(&rows, &path, "test adapter").unwrap();
         let svg = std::fs::read_to_string(&path).unwrap();
         for s in [

@@ -443,8 +443,9 @@ mod tests {
                     .collect()
             })
             .collect();
-        let path =
-            std::env::temp_dir().join(format!("frcd-xtask-tritri-{}.svg", std::process::id()));
+        let path = crate::plot::TempFile(
+            std::env::temp_dir().join(format!("frcd-xtask-tritri-{}.svg", std::process::id())),
+        );
         plot(&path, &table).unwrap();
         let svg = std::fs::read_to_string(&path).unwrap();
         for s in KERNELS {

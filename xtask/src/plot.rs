@@ -257,12 +257,42 @@ fn draw(area: &DrawingArea<SVGBackend<'_>, Shift>, c: &Chart) -> Result<()> {
     Ok(())
 }
 
+/// Test helper for the plot tests here and in the bench modules: a file path (in the system
+/// temp folder, named by the caller, unique per process and test) that is removed when the
+/// guard drops, at the end of the test, pass or fail.
+#[cfg(test)]
+pub(crate) struct TempFile(pub(crate) std::path::PathBuf);
+
+#[cfg(test)]
+impl std::ops::Deref for TempFile {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+#[cfg(test)]
+impl AsRef<Path> for TempFile {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+#[cfg(test)]
+impl Drop for TempFile {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn temp(name: &str) -> std::path::PathBuf {
-        std::env::temp_dir().join(format!("frcd-xtask-plot-{}-{name}.svg", std::process::id()))
+    fn temp(name: &str) -> TempFile {
+        TempFile(
+            std::env::temp_dir().join(format!("frcd-xtask-plot-{}-{name}.svg", std::process::id())),
+        )
     }
 
     #[test]
@@ -290,7 +320,6 @@ mod tests {
             let path = temp(&format!("{xlog}-{ylog}"));
             write_svg(&path, (400, 300), &[chart.clone(), chart]).unwrap();
             let svg = std::fs::read_to_string(&path).unwrap();
-            std::fs::remove_file(&path).ok();
             assert!(svg.starts_with("<svg"));
             for s in ["caption here", "x label", "y label", "p one", "p two"] {
                 assert_eq!(svg.matches(s).count(), 2, "{s} once per panel");

@@ -3,17 +3,37 @@
 //! and the box pass run, and the table carries every column. Without a GPU adapter: SKIP,
 //! unless `FRCD_REQUIRE_GPU=1`.
 
+use std::path::{Path, PathBuf};
 use std::process::Command;
+
+/// The bench's output folder in the system temp folder, removed with everything in it when the
+/// guard drops: at the end of the test, pass, fail or skip.
+struct TempDir(PathBuf);
+
+impl std::ops::Deref for TempDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
 
 #[test]
 fn bench_gpgpu_runs_and_writes_every_column() {
-    let out = std::env::temp_dir().join(format!("frcd-bench-gpgpu-smoke-{}", std::process::id()));
+    let out = TempDir(
+        std::env::temp_dir().join(format!("frcd-bench-gpgpu-smoke-{}", std::process::id())),
+    );
     let run = Command::new(env!("CARGO_BIN_EXE_xtask"))
         .args([
             "bench", "gpgpu", "--levels", "1,2", "--pairs", "2", "--runs", "1",
         ])
         .args(["--frame-parts", "2", "--bodies", "2,40", "--out"])
-        .arg(&out)
+        .arg(&*out)
         .output()
         .expect("xtask runs");
     let text =
@@ -45,5 +65,4 @@ fn bench_gpgpu_runs_and_writes_every_column() {
     for r in rows {
         assert_eq!(r.matches('|').count(), 13, "{r}");
     }
-    let _ = std::fs::remove_dir_all(&out);
 }

@@ -119,8 +119,30 @@ fn inputs(dir: &Path) -> Vec<(String, Vec<u8>)> {
         .collect()
 }
 
-/// Runs `body` on `data`; on a panic, saves the input and returns a line naming it.
+/// A folder removed with everything in it when the guard drops.
+struct TempDir(PathBuf);
+
+impl std::ops::Deref for TempDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Where a failing input is saved for the developer to pick up (kept on purpose).
+fn saved_inputs_dir() -> PathBuf {
+    std::env::temp_dir().join("frcd-fuzz-smoke")
+}
+
+/// Runs `body` on `data`; on a panic, saves the input in `dir` and returns a line naming it.
 fn run_one(
+    dir: &Path,
     target: &str,
     body: bodies::Body,
     data: &[u8],
@@ -130,9 +152,8 @@ fn run_one(
     if catch_unwind(AssertUnwindSafe(|| body(data))).is_ok() {
         return None;
     }
-    let dir = std::env::temp_dir().join("frcd-fuzz-smoke");
     let path = dir.join(format!("{target}-{n}"));
-    let saved = std::fs::create_dir_all(&dir)
+    let saved = std::fs::create_dir_all(dir)
         .and_then(|()| std::fs::write(&path, data))
         .map_or_else(
             |e| format!("(not saved: {e})"),
@@ -151,6 +172,7 @@ fn every_seed_regression_and_mutation_passes_its_target() {
         .unwrap_or(2000);
     let mut failures = Vec::new();
     let mut total = 0usize;
+    let saved_inputs = saved_inputs_dir();
     for (ti, (target, body)) in bodies::TARGETS.into_iter().enumerate() {
         let seeds = inputs(&fuzz_dir().join("seeds").join(target));
         assert!(!seeds.is_empty(), "fuzz/seeds/{target} has no seed");
@@ -158,7 +180,7 @@ fn every_seed_regression_and_mutation_passes_its_target() {
         let corpus: Vec<(String, Vec<u8>)> = seeds.into_iter().chain(regressions).collect();
         let mut n = 0usize;
         for (origin, data) in &corpus {
-            failures.extend(run_one(target, body, data, origin, n));
+            failures.extend(run_one(&saved_inputs, target, body, data, origin, n));
             n += 1;
         }
         let pool: Vec<Vec<u8>> = corpus.iter().map(|(_, d)| d.clone()).collect();
@@ -171,7 +193,7 @@ fn every_seed_regression_and_mutation_passes_its_target() {
                 data = mutate(&mut rng, &data, &pool);
             }
             let origin = format!("mutation of {}", corpus[k].0);
-            failures.extend(run_one(target, body, &data, &origin, n));
+            failures.extend(run_one(&saved_inputs, target, body, &data, &origin, n));
             n += 1;
         }
         total += n;
@@ -230,15 +252,24 @@ fn a_panic_is_reported_and_its_input_saved() {
     fn picky(data: &[u8]) {
         assert!(!data.contains(&0xAB), "0xAB found");
     }
-    assert_eq!(run_one("picky", picky, b"fine", "seed", 0), None);
-    let line = run_one("picky", picky, &[1, 0xAB, 2], "mutation of seed", 7).unwrap();
+    // A folder of this test's own (not the shared one a developer may be collecting failing
+    // inputs in), removed when the test ends, pass or fail.
+    let dir =
+        TempDir(std::env::temp_dir().join(format!("frcd-fuzz-smoke-{}-picky", std::process::id())));
+    let _ = std::fs::remove_dir_all(&*dir);
+    assert_eq!(run_one(&dir, "picky", picky, b"fine", "seed", 0), None);
+    assert!(!dir.exists(), "an input that passes is not saved");
+    let line = run_one(&dir, "picky", picky, &[1, 0xAB, 2], "mutation of seed", 7).unwrap();
     assert!(
         line.contains("picky: input 7 (mutation of seed) panicked"),
         "{line}"
     );
-    let saved = std::env::temp_dir().join("frcd-fuzz-smoke/picky-7");
+    let saved = dir.join("picky-7");
+    assert!(
+        line.ends_with(&format!("input saved to {}", saved.display())),
+        "{line}"
+    );
     assert_eq!(std::fs::read(&saved).unwrap(), [1, 0xAB, 2]);
-    std::fs::remove_file(saved).ok();
 }
 
 /// The mutator is deterministic and exercises every kind of edit.

@@ -91,7 +91,6 @@ fn check_writes_json_and_csv_reports() {
         let csv = std::fs::read_to_string(dir.join("r.csv")).unwrap();
         assert!(csv.lines().count() >= 6, "{csv}");
     }
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
@@ -141,7 +140,6 @@ fn bad_input_fails_cleanly() {
         ),
         "--frame 7",
     );
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
@@ -175,7 +173,6 @@ fn calibrate_writes_a_loadable_model() {
         "{}",
         text(&o)
     );
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
@@ -197,7 +194,6 @@ fn bench_prints_a_row_per_backend() {
     for r in rows.iter().filter(|r| r["mode"] == "exact") {
         assert_eq!(r["differences_from_cpu_exact"], 0, "{r}");
     }
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[cfg(feature = "gpu")]
@@ -242,7 +238,6 @@ fn render_writes_a_png() {
         .filter(|p| p[0] > 150 && p[1] < 60 && p[2] < 60)
         .count();
     assert!(red > 0, "no highlighted pixel");
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// The demo: `frcd check testdata/bogie/scene.json` reports exactly the schedule the generator
@@ -278,5 +273,4 @@ fn bogie_demo_matches_the_expected_schedule() {
     let want = frcd_io::Report::read_json(&expected).unwrap();
     assert!(!want.pairs.is_empty());
     assert_eq!(got.pairs, want.pairs);
-    std::fs::remove_dir_all(&dir).ok();
 }

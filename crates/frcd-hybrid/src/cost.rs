@@ -286,10 +286,39 @@ mod tests {
         assert_eq!(cpu.gpu_narrow_min_triangles(), None);
     }
 
+    /// A fresh folder in the system temp folder, removed with its contents when the guard
+    /// drops (at the end of the test, pass or fail).
+    struct TempDir(std::path::PathBuf);
+
+    impl std::ops::Deref for TempDir {
+        type Target = Path;
+        fn deref(&self) -> &Path {
+            &self.0
+        }
+    }
+
+    impl AsRef<Path> for TempDir {
+        fn as_ref(&self) -> &Path {
+            &self.0
+        }
+    }
+
+    impl Drop for TempDir {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    fn temp_dir(name: &str) -> TempDir {
+        let dir = TempDir(std::env::temp_dir().join(format!("{name}-{}", std::process::id())));
+        let _ = std::fs::remove_dir_all(&*dir);
+        std::fs::create_dir_all(&*dir).unwrap();
+        dir
+    }
+
     #[test]
     fn json_round_trip_and_bad_files() {
-        let dir = std::env::temp_dir().join(format!("frcd-hybrid-cost-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = temp_dir("frcd-hybrid-cost");
         let p = dir.join("cost.json");
         let m = CostModel::default();
         m.save(&p).unwrap();
@@ -308,13 +337,11 @@ mod tests {
             CostModel::load(dir.join("missing.json")),
             Err(CostModelError::Io { .. })
         ));
-        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]
     fn load_refuses_non_files_and_huge_files_unread() {
-        let dir = std::env::temp_dir().join(format!("frcd-hybrid-cost-big-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = temp_dir("frcd-hybrid-cost-big");
         // A directory and (on Unix) an endless device are refused before any read.
         assert!(matches!(
             CostModel::load(&dir),
@@ -337,14 +364,11 @@ mod tests {
             CostModel::load(&big),
             Err(CostModelError::Json { .. })
         ));
-        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]
     fn save_is_atomic_and_leaves_no_temporary() {
-        let dir =
-            std::env::temp_dir().join(format!("frcd-hybrid-cost-save-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = temp_dir("frcd-hybrid-cost-save");
         let p = dir.join("cost.json");
         let m = CostModel::default();
         m.save(&p).unwrap();
@@ -368,6 +392,5 @@ mod tests {
             std::fs::read_dir(&dir).unwrap().count() == 2,
             "no temporary left"
         );
-        std::fs::remove_dir_all(&dir).ok();
     }
 }

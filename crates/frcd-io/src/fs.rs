@@ -271,9 +271,28 @@ fn canonical_target(p: &Path) -> Option<PathBuf> {
 mod tests {
     use super::*;
 
-    fn dir(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("frcd-io-fs-{}-{name}", std::process::id()));
-        std::fs::create_dir_all(&d).unwrap();
+    /// A fresh folder in the system temp folder, unique to this process and test, removed with
+    /// everything in it when the guard drops: at the end of the test, pass or fail.
+    struct TempDir(PathBuf);
+
+    impl std::ops::Deref for TempDir {
+        type Target = Path;
+        fn deref(&self) -> &Path {
+            &self.0
+        }
+    }
+
+    impl Drop for TempDir {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    fn dir(name: &str) -> TempDir {
+        let d =
+            TempDir(std::env::temp_dir().join(format!("frcd-io-fs-{}-{name}", std::process::id())));
+        let _ = std::fs::remove_dir_all(&*d);
+        std::fs::create_dir_all(&*d).unwrap();
         d
     }
 
@@ -337,7 +356,7 @@ mod tests {
         write_atomic(&p, b"first").unwrap();
         write_atomic(&p, b"second").unwrap();
         assert_eq!(std::fs::read(&p).unwrap(), b"second");
-        let left: Vec<_> = std::fs::read_dir(&d)
+        let left: Vec<_> = std::fs::read_dir(&*d)
             .unwrap()
             .map(|e| e.unwrap().file_name())
             .filter(|n| n.to_string_lossy().ends_with(".tmp"))

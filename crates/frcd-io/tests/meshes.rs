@@ -7,10 +7,49 @@ use frcd_io::{
 };
 use std::path::{Path, PathBuf};
 
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("frcd-io-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+/// A fresh folder in the system temp folder, unique to this process and test, removed with
+/// everything in it when the guard drops: at the end of the test, pass or fail.
+struct TempDir(PathBuf);
+
+impl std::ops::Deref for TempDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn temp_dir(name: &str) -> TempDir {
+    let dir = TempDir(std::env::temp_dir().join(format!("frcd-io-{}-{name}", std::process::id())));
+    let _ = std::fs::remove_dir_all(&*dir);
+    std::fs::create_dir_all(&*dir).unwrap();
     dir
+}
+
+#[test]
+fn temp_dir_is_removed_with_its_contents_when_dropped() {
+    let dir = temp_dir("guard");
+    let path = dir.to_path_buf();
+    std::fs::create_dir_all(path.join("sub")).unwrap();
+    std::fs::write(path.join("sub/f.txt"), "x").unwrap();
+    assert!(path.join("sub/f.txt").is_file());
+    drop(dir);
+    assert!(!path.exists(), "{} left behind", path.display());
+    // The guard also runs when a test panics.
+    let unwound = std::panic::catch_unwind(|| {
+        let dir = temp_dir("guard-panic");
+        std::fs::write(dir.join("f.txt"), "x").unwrap();
+        panic!("{}", dir.display());
+    });
+    let message = unwound.unwrap_err();
+    let path = message.downcast_ref::<String>().unwrap();
+    assert!(path.ends_with("guard-panic"), "{path}");
+    assert!(!Path::new(path).exists(), "{path} left behind");
 }
 
 fn cube() -> TriMesh {

@@ -5,11 +5,30 @@ use frcd_io::{
     Error, FrameReport, Interference, Location, Report, Scene, SceneFile, Trajectory,
     write_stl_binary,
 };
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("frcd-io-scene-{}-{name}", std::process::id()));
+/// A fresh folder in the system temp folder, unique to this process and test, removed with
+/// everything in it when the guard drops: at the end of the test, pass or fail.
+struct TempDir(PathBuf);
+
+impl std::ops::Deref for TempDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn temp_dir(name: &str) -> TempDir {
+    let dir =
+        TempDir(std::env::temp_dir().join(format!("frcd-io-scene-{}-{name}", std::process::id())));
+    let _ = std::fs::remove_dir_all(&*dir);
     std::fs::create_dir_all(dir.join("meshes")).unwrap();
     write_stl_binary(
         dir.join("meshes/box.stl"),
@@ -34,7 +53,7 @@ const SCENE: &str = r#"{
   ]
 }"#;
 
-fn write(dir: &std::path::Path, name: &str, text: &str) -> PathBuf {
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     let p = dir.join(name);
     std::fs::write(&p, text).unwrap();
     p

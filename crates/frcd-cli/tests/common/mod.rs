@@ -1,5 +1,6 @@
 //! Helpers shared by the CLI test binaries: run the built `frcd` (killed after a time limit, so
-//! a hang fails instead of sticking), format its output, and make a fresh folder per test.
+//! a hang fails instead of sticking), format its output, and make a fresh folder per test
+//! (removed when the test ends).
 #![allow(dead_code)] // each test binary uses a subset
 
 use std::path::{Path, PathBuf};
@@ -54,12 +55,36 @@ pub fn assert_clean_failure(o: &Output, needle: &str) {
     assert!(t.contains(needle), "expected '{needle}' in:\n{t}");
 }
 
-pub fn tempdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!(
+/// A fresh folder in the system temp folder, unique to the test binary, this process and
+/// `name`, removed with everything in it when the guard drops: at the end of the test, pass or
+/// fail.
+pub struct TempDir(PathBuf);
+
+impl std::ops::Deref for TempDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for TempDir {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+pub fn tempdir(name: &str) -> TempDir {
+    let d = TempDir(std::env::temp_dir().join(format!(
         "frcd-{}-{name}-{}",
         env!("CARGO_CRATE_NAME"),
         std::process::id()
-    ));
+    )));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d
