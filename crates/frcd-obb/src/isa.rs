@@ -13,7 +13,7 @@
 //! Both builds perform the same IEEE operations in the same order: Rust never contracts a
 //! multiply and an add into a fused multiply-add, and FMA is not enabled for the AVX2 build
 //! either, so every lane's verdict, every recorded margin, counter and answer is bit for bit
-//! the same (tested in `query.rs`), and the error bounds of `wide.rs` hold for both. (The AVX2
+//! the same (tested in `query/tests.rs`), and the error bounds of `wide.rs` hold for both. (The AVX2
 //! build runs two steps' lanes as one eight-lane test that stops once both are done; where no
 //! front is recorded a lane's margin there may come from more axes, never its verdict.)
 //!

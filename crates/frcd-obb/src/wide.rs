@@ -5,8 +5,8 @@
 //! runs). The AVX2 build also runs two such tests as one eight-lane test ([`avx`], intrinsics:
 //! the module's only unsafe code), with the same operations in the same order per lane.
 //!
-//! The traversal (`query.rs`) tests one node of one tree against the (up to four) nodes two
-//! levels below a node of the other tree: A's grandchildren against one placed box of B, or
+//! The traversal (`query/traverse.rs`) tests one node of one tree against the (up to four)
+//! nodes two levels below a node of the other tree: A's grandchildren against one placed box of B, or
 //! B's grandchildren, placed in A's frame in lanes, against one box of A. Each lane computes
 //! exactly the scalar operations below, in the same order; a lane's answer does not depend on
 //! the other lanes.
@@ -605,8 +605,8 @@ pub(crate) fn separation4(a: &ALanes, b: &BLanes, s: f32, active: u32) -> F4 {
 }
 
 /// Two four-lane steps in one eight-lane test, in AVX2 registers (the traversal's AVX2 build,
-/// `query.rs`). Each step's lanes are built as one [`avx::Half`] straight from where they lie (a
-/// quad of A, a broadcast lane of a placed B block, a node of A broadcast, a placed quad of B),
+/// `query/traverse.rs`). Each step's lanes are built as one [`avx::Half`] straight from where
+/// they lie (a quad of A, a broadcast lane of a placed B block, a node of A broadcast, a placed quad of B),
 /// and the test runs the operations of [`separation4`] in the same order on eight lanes, so each
 /// lane is separated exactly when [`separation4`] separates it.
 #[cfg(target_arch = "x86_64")]
