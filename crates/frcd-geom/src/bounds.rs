@@ -144,11 +144,13 @@ impl Aabb {
     /// that rounding cannot make it smaller than the exact one: the slack is a few ulp of every
     /// magnitude that was rounded on the way, including the local centre and the translation,
     /// which may be large even when they cancel (a body far from its frame's origin posed back
-    /// near the world origin).
+    /// near the world origin). The pose is taken as a rigid motion ([`Pose::rigid`]), as
+    /// [`Pose::relative_to`] takes it.
     pub fn transformed(&self, pose: &Pose) -> Self {
         if self.is_empty() {
             return *self;
         }
+        let pose = pose.rigid();
         let m = pose.rotation_matrix();
         let local_c = self.center();
         let c = pose.transform_point(local_c);

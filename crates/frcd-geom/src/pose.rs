@@ -183,17 +183,54 @@ impl Pose {
         }
     }
 
-    /// The pose of `self` expressed in the frame of `frame`: `frame⁻¹ ∘ self`.
+    /// This pose as a rigid motion: the same pose, bit for bit, when its quaternion has unit
+    /// length to rounding (`|q|²` within 8 ε of 1, as [`Pose::new`] leaves it), else with the
+    /// quaternion normalised.
+    ///
+    /// A quaternion a little off unit length (what [`Pose::is_valid`] and [`Pose::validate`]
+    /// accept) does not turn points rigidly: `q * v` scales them by `|q|²`, and
+    /// [`Pose::rotation_matrix`] distorts them another way. [`Pose::relative_to`] and
+    /// [`crate::Aabb::transformed`] take the pose through this first, so such a pose means the
+    /// same rigid motion to the narrow phase (which tests B in A's frame) and to the world boxes
+    /// of a broad phase.
+    ///
+    /// ```
+    /// use frcd_geom::{Pose, DVec3, DQuat};
+    /// let off = Pose {
+    ///     translation: DVec3::X,
+    ///     rotation: DQuat::from_xyzw(0.0, 0.0, 0.0, 1.0 + 4e-10),
+    /// };
+    /// assert!(off.is_valid());
+    /// assert_eq!(off.rigid().rotation, DQuat::IDENTITY);
+    /// let unit = Pose::new(DVec3::X, DQuat::from_rotation_z(0.3));
+    /// assert_eq!(unit.rigid(), unit);
+    /// ```
+    #[inline]
+    pub fn rigid(&self) -> Self {
+        let n = self.rotation.length_squared();
+        if (n - 1.0).abs() <= 8.0 * f64::EPSILON {
+            *self
+        } else {
+            Self {
+                translation: self.translation,
+                rotation: self.rotation.normalize(),
+            }
+        }
+    }
+
+    /// The pose of `self` expressed in the frame of `frame`: `frame⁻¹ ∘ self`, both taken as
+    /// rigid motions ([`Pose::rigid`]).
     ///
     /// Narrow-phase queries test body B in the frame of body A with
     /// `pose_b.relative_to(&pose_a)`, so world offsets of 1e6 cost no precision beyond this one
     /// subtraction.
     #[inline]
     pub fn relative_to(&self, frame: &Pose) -> Self {
+        let (this, frame) = (self.rigid(), frame.rigid());
         let inv = frame.rotation.conjugate();
         Self {
-            translation: inv * (self.translation - frame.translation),
-            rotation: (inv * self.rotation).normalize(),
+            translation: inv * (this.translation - frame.translation),
+            rotation: (inv * this.rotation).normalize(),
         }
     }
 

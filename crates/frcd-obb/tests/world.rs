@@ -2,7 +2,7 @@
 //! the brute-force oracle.
 
 use frcd_geom::{DQuat, DVec3, Pose, TriMesh, shapes};
-use frcd_obb::{BuildOptions, ObbTree, World, WorldError, WorldOptions, oracle};
+use frcd_obb::{BuildOptions, ObbTree, Request, World, WorldError, WorldOptions, collide, oracle};
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use std::sync::Arc;
 
@@ -664,4 +664,44 @@ fn all_pairs_within(w: &World, margin: f64) -> Vec<(frcd_obb::BodyId, frcd_obb::
     }
     want.sort_unstable_by_key(|&(a, b)| (a.index(), b.index()));
     want
+}
+
+/// A pose whose quaternion is a little off unit length (within what `Pose::is_valid` and the
+/// World accept) must give the World the same contacts as `collide` with the same poses: the
+/// broad phase's world boxes and the narrow phase must map a body by the same rigid motion.
+/// The quaternion `(0, 0, 0, s)`, `s² = 1 + 9·10⁻¹⁰`, turns nothing, but `q * v` scales by `s²`:
+/// a body whose triangles sit 1,000 units from its own origin got a world box shifted by about
+/// 10⁻⁶ from its triangles, and the World missed a contact `collide` reported (this test failed
+/// so before `Pose::rigid`). The same with the off-unit quaternion on the frame body A, whose
+/// inverse scaled the relative translation.
+#[test]
+fn nearly_unit_quaternions_keep_world_boxes_around_their_bodies() {
+    let cube = shapes::cuboid(DVec3::splat(0.5));
+    let a = Arc::new(ObbTree::build(&cube, &BuildOptions::default()));
+    let far = cube.transformed(&Pose::new(DVec3::new(1000.0, 0.0, 0.0), DQuat::IDENTITY));
+    let b = Arc::new(ObbTree::build(&far, &BuildOptions::default()));
+    let s = (1.0f64 + 9e-10).sqrt();
+    let off = DQuat::from_xyzw(0.0, 0.0, 0.0, s);
+    for (qa, qb) in [(DQuat::IDENTITY, off), (off, DQuat::IDENTITY), (off, off)] {
+        for overlap in [1e-7, 1e-8, 0.0, -1e-7] {
+            // A's cube spans x in [1999.5, 2000.5], B's (1,000 from its origin) is placed to
+            // overlap it by `overlap` (a gap when negative).
+            let pose_a = Pose {
+                translation: DVec3::new(2000.0, 0.0, 0.0),
+                rotation: qa,
+            };
+            let pose_b = Pose {
+                translation: DVec3::new(2000.5 - 999.5 - overlap, 0.0, 0.0),
+                rotation: qb,
+            };
+            assert!(pose_a.is_valid() && pose_b.is_valid());
+            let direct = collide(&a, &pose_a, &b, &pose_b, &Request::default()).collide;
+            assert_eq!(direct, overlap >= 0.0, "overlap {overlap:e}");
+            let mut world = World::new(WorldOptions::default());
+            world.add_body(a.clone(), pose_a, false).unwrap();
+            world.add_body(b.clone(), pose_b, false).unwrap();
+            let stepped = !world.step().contacts.is_empty();
+            assert_eq!(stepped, direct, "overlap {overlap:e}, {qa:?} {qb:?}");
+        }
+    }
 }
