@@ -5,30 +5,13 @@ use frcd_geom::{DVec3, TriMesh, shapes};
 use frcd_io::{
     Error, LoadOptions, Location, load_mesh, load_obj_objects, write_obj, write_stl_binary,
 };
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-/// A fresh folder in the system temp folder, unique to this process and test, removed with
-/// everything in it when the guard drops: at the end of the test, pass or fail.
-struct TempDir(PathBuf);
-
-impl std::ops::Deref for TempDir {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
+mod common;
+use common::TempDir;
 
 fn temp_dir(name: &str) -> TempDir {
-    let dir = TempDir(std::env::temp_dir().join(format!("frcd-io-{}-{name}", std::process::id())));
-    let _ = std::fs::remove_dir_all(&*dir);
-    std::fs::create_dir_all(&*dir).unwrap();
-    dir
+    TempDir::new("mesh", name)
 }
 
 #[test]

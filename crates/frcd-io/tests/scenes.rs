@@ -8,27 +8,11 @@ use frcd_io::{
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-/// A fresh folder in the system temp folder, unique to this process and test, removed with
-/// everything in it when the guard drops: at the end of the test, pass or fail.
-struct TempDir(PathBuf);
-
-impl std::ops::Deref for TempDir {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
+mod common;
+use common::TempDir;
 
 fn temp_dir(name: &str) -> TempDir {
-    let dir =
-        TempDir(std::env::temp_dir().join(format!("frcd-io-scene-{}-{name}", std::process::id())));
-    let _ = std::fs::remove_dir_all(&*dir);
+    let dir = TempDir::new("scene", name);
     std::fs::create_dir_all(dir.join("meshes")).unwrap();
     write_stl_binary(
         dir.join("meshes/box.stl"),
