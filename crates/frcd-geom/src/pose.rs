@@ -152,34 +152,38 @@ impl Pose {
         }
     }
 
-    /// Maps a point from the local frame to the parent frame.
+    /// Maps a point from the local frame to the parent frame (as a rigid motion,
+    /// [`Pose::rigid`]).
     #[inline]
     pub fn transform_point(&self, p: DVec3) -> DVec3 {
-        self.rotation * p + self.translation
+        let r = self.rigid();
+        r.rotation * p + r.translation
     }
 
-    /// Rotates a direction (no translation).
+    /// Rotates a direction (no translation; as a rigid motion, [`Pose::rigid`]).
     #[inline]
     pub fn transform_vector(&self, v: DVec3) -> DVec3 {
-        self.rotation * v
+        self.rigid().rotation * v
     }
 
-    /// The inverse transform.
+    /// The inverse transform (of the rigid motion, [`Pose::rigid`]).
     #[inline]
     pub fn inverse(&self) -> Self {
-        let r = self.rotation.conjugate();
+        let r = self.rigid().rotation.conjugate();
         Self {
             translation: -(r * self.translation),
             rotation: r,
         }
     }
 
-    /// `self ∘ other`: apply `other` first, then `self`.
+    /// `self ∘ other`: apply `other` first, then `self` (both as rigid motions,
+    /// [`Pose::rigid`]).
     #[inline]
     pub fn compose(&self, other: &Pose) -> Self {
+        let (a, b) = (self.rigid(), other.rigid());
         Self {
-            translation: self.rotation * other.translation + self.translation,
-            rotation: (self.rotation * other.rotation).normalize(),
+            translation: a.rotation * b.translation + a.translation,
+            rotation: (a.rotation * b.rotation).normalize(),
         }
     }
 
@@ -188,11 +192,13 @@ impl Pose {
     /// quaternion normalised.
     ///
     /// A quaternion a little off unit length (what [`Pose::is_valid`] and [`Pose::validate`]
-    /// accept) does not turn points rigidly: `q * v` scales them by `|q|²`, and
-    /// [`Pose::rotation_matrix`] distorts them another way. [`Pose::relative_to`] and
-    /// [`crate::Aabb::transformed`] take the pose through this first, so such a pose means the
-    /// same rigid motion to the narrow phase (which tests B in A's frame) and to the world boxes
-    /// of a broad phase.
+    /// accept) does not turn points rigidly: `q * v` scales them by `|q|²`, and the matrix of
+    /// `q` distorts them another way. Every map of a pose ([`Pose::transform_point`],
+    /// [`Pose::transform_vector`], [`Pose::rotation_matrix`], [`Pose::inverse`],
+    /// [`Pose::compose`], [`Pose::relative_to`], [`crate::Aabb::transformed`]) takes it
+    /// through this first, so such a pose means the same rigid motion to the narrow phase
+    /// (which tests B in A's frame), to the world boxes of a broad phase and to the points
+    /// reported in world coordinates.
     ///
     /// ```
     /// use frcd_geom::{Pose, DVec3, DQuat};
@@ -237,7 +243,7 @@ impl Pose {
     /// The rotation as a 3×3 matrix (columns are the local axes in the parent frame).
     #[inline]
     pub fn rotation_matrix(&self) -> DMat3 {
-        DMat3::from_quat(self.rotation)
+        DMat3::from_quat(self.rigid().rotation)
     }
 
     /// True when translation and rotation are finite and the rotation is a unit quaternion
@@ -260,6 +266,43 @@ impl core::ops::Mul for Pose {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A pose whose quaternion is off unit length within what `is_valid` accepts maps points
+    /// rigidly through every helper, the same as its normalised pose; a unit pose is untouched.
+    #[test]
+    fn nearly_unit_quaternions_map_rigidly_everywhere() {
+        let unit = DQuat::from_axis_angle(DVec3::new(0.3, -0.5, 0.8).normalize(), 1.1);
+        let off = Pose {
+            translation: DVec3::new(1e3, -2e3, 5e2),
+            rotation: unit * (1.0 + 4e-10),
+        };
+        assert!(off.is_valid() && off.rigid() != off);
+        let rigid = Pose {
+            translation: off.translation,
+            rotation: off.rotation.normalize(),
+        };
+        assert_eq!(off.rigid(), rigid);
+        let v = DVec3::new(1e3, 2.5e2, -7e2);
+        // `q * v` of the raw quaternion would be longer by about 4e-10 * |v| = 5e-7.
+        let moved = off.transform_point(v) - off.translation;
+        assert!(
+            (moved.length() - v.length()).abs() < 1e-12,
+            "{}",
+            moved.length() - v.length()
+        );
+        assert_eq!(off.transform_point(v), rigid.transform_point(v));
+        assert_eq!(off.transform_vector(v), rigid.transform_vector(v));
+        assert_eq!(off.rotation_matrix(), rigid.rotation_matrix());
+        assert_eq!(off.inverse(), rigid.inverse());
+        assert_eq!(off.compose(&off), rigid.compose(&rigid));
+        assert_eq!(off.relative_to(&off), rigid.relative_to(&rigid));
+        // The round trip through the inverse comes back to the point.
+        let back = off.inverse().transform_point(off.transform_point(v));
+        assert!((back - v).length() < 1e-9, "{}", (back - v).length());
+        // Unit quaternions are left bit for bit as they are.
+        let p = Pose::new(DVec3::X, unit);
+        assert_eq!(p.rigid(), p);
+    }
 
     #[test]
     fn try_new_refuses_non_finite_and_zero_input() {
