@@ -24,9 +24,9 @@
 //! - placed axes `P_j[k] = (M32_k0 v_j0 + M32_k1 v_j1) + M32_k2 v_j2`:
 //!   `|P32 − P| ≤ (ε + γ₃(1 + ε)) Σ_l |M_kl| |v_jl| ≤ 4.02 ε` per entry (`γₙ = nε/(1 − nε)`);
 //! - `R_ij = (u_i0 P_j0 + u_i1 P_j1) + u_i2 P_j2`: `|R32 − R| ≤ 4.02 ε ‖u_i‖₁ +
-//!   γ₃ ‖u_i‖ ‖P_j‖ ≤ 10.2 ε`, so `|R32| + `[`EPS_R32`]` ≥ |R| + `[`EPS_R`] and every radius the
-//!   f32 test computes is at least `(1 − γ₆)` times the f64 test's radius (which is at most
-//!   `1.03 ΣH`);
+//!   γ₃ ‖u_i‖ ‖P_j‖ ≤ 10.2 ε`, so `|R32| + `[`EPS_R32`]` ≥ |R| + `[`EPS_R`](crate::sat::EPS_R)
+//!   and every radius the f32 test computes is at least `(1 − γ₆)` times the f64 test's radius
+//!   (which is at most `1.03 ΣH`);
 //! - `d`: `|d32_k − d_k| ≤ 1.01 ε |d_k|` (plus f64 rounding of order `2⁻⁵⁰ M`, `M` the query's
 //!   magnitude); `t_i = u_i · d`: error `≤ 4.3 ε D`; B's face projections `P_j · d`:
 //!   `≤ 8.3 ε D`; the cross projections `t_{i2} R_{i1 j} − t_{i1} R_{i2 j}`:

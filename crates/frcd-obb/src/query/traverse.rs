@@ -353,7 +353,7 @@ pub(super) struct Ctx<'a> {
 /// pays the sort at every step of the disjoint queries too, which cost more than it saved.
 pub(super) const ORDERED_STEPS: u32 = 16;
 
-/// [`ORDERED_STEPS`], or in tests the value [`with_ordered_steps`] set for this thread.
+/// [`ORDERED_STEPS`], or in tests the value `with_ordered_steps` set for this thread.
 #[inline]
 pub(super) fn ordered_steps() -> u32 {
     #[cfg(test)]

@@ -318,10 +318,11 @@ impl BoxTree {
         }
     }
 
-    /// [`BoxTree::query`] for many boxes at once: `found(i, slot)` for every leaf within
-    /// `margin` of `boxes[i]`. [`LANES`] queries advance side by side, one node each in turn,
-    /// and every node pushed is prefetched: a lone query waits on one cache miss per level
-    /// (about 18 levels at 262,144 leaves), these overlap theirs. `stacks` is scratch.
+    /// `BoxTree::query` (the tests' reference) for many boxes at once: `found(i, slot)` for
+    /// every leaf within `margin` of `boxes[i]`. [`LANES`] queries advance side by side, one
+    /// node each in turn, and every node pushed is prefetched: a lone query waits on one cache
+    /// miss per level (about 18 levels at 262,144 leaves), these overlap theirs. `stacks` is
+    /// scratch.
     pub(super) fn query_many(
         &self,
         boxes: &[Aabb],
