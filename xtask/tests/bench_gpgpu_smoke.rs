@@ -3,25 +3,10 @@
 //! and the box pass run, and the table carries every column. Without a GPU adapter: SKIP,
 //! unless `FRCD_REQUIRE_GPU=1`.
 
-use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// The bench's output folder in the system temp folder, removed with everything in it when the
-/// guard drops: at the end of the test, pass, fail or skip.
-struct TempDir(PathBuf);
-
-impl std::ops::Deref for TempDir {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
+mod common;
+use common::TempDir;
 
 #[test]
 fn bench_gpgpu_runs_and_writes_every_column() {

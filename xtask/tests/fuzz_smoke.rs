@@ -20,6 +20,9 @@ mod bodies;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 
+mod common;
+use common::TempDir;
+
 /// Inputs grow by inserts and splices; the parsers' interesting structure is near the start.
 const MAX_LEN: usize = 4096;
 
@@ -117,22 +120,6 @@ fn inputs(dir: &Path) -> Vec<(String, Vec<u8>)> {
             (p.display().to_string(), bytes)
         })
         .collect()
-}
-
-/// A folder removed with everything in it when the guard drops.
-struct TempDir(PathBuf);
-
-impl std::ops::Deref for TempDir {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
 }
 
 /// Where a failing input is saved for the developer to pick up (kept on purpose).

@@ -150,10 +150,12 @@ impl Aabb {
         if self.is_empty() {
             return *self;
         }
+        // Made rigid once; the quaternion and matrix below are then used as they are (the
+        // same values `rotation_matrix` and `transform_point` give for this rigid pose).
         let pose = pose.rigid();
-        let m = pose.rotation_matrix();
+        let m = DMat3::from_quat(pose.rotation);
         let local_c = self.center();
-        let c = pose.transform_point(local_c);
+        let c = pose.rotation * local_c + pose.translation;
         let h = self.half_extents();
         let abs = DMat3::from_cols(m.x_axis.abs(), m.y_axis.abs(), m.z_axis.abs());
         let e = abs * h;

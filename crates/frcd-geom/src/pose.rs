@@ -217,9 +217,12 @@ impl Pose {
         if (n - 1.0).abs() <= 8.0 * f64::EPSILON {
             *self
         } else {
+            // What glam's `normalize` computes, without its optional finiteness assertion (an
+            // engine that turns on glam's `glam-assert` would otherwise see a zero or NaN
+            // quaternion panic here instead of giving the NaN pose `Pose::new` documents).
             Self {
                 translation: self.translation,
-                rotation: self.rotation.normalize(),
+                rotation: self.rotation * (1.0 / n.sqrt()),
             }
         }
     }
