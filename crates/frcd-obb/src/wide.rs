@@ -1014,9 +1014,52 @@ mod tests {
                 seen.iter().all(|&m| (m > 0.0) == (seen[0] > 0.0)),
                 "{what}: {seen:?}"
             );
+            // The eight-lane test (AVX2 build), an A split in one half and a B split in the
+            // other: recording a front, each half's margins are the four-lane test's bits; in
+            // plain queries (it runs on until both halves are done) the same verdicts.
+            #[cfg(target_arch = "x86_64")]
+            if crate::isa::has_avx2() {
+                let splat_b = sat.place(&c.b).splat();
+                let quad = Quad::gather(&nodes_a, &ids, 4);
+                let four = [
+                    separation4(&al, &splat_b, sat.s(), 1).0[0],
+                    separation4(&ALanes::splat(&c.a), &bl, sat.s(), 1).0[0],
+                ];
+                // SAFETY: the CPU has AVX2 (`isa::has_avx2`).
+                #[allow(unsafe_code)]
+                let (recorded, plain) = unsafe { eight_lane(&quad, &splat_b, &c.a, &bl, sat.s()) };
+                assert_eq!(recorded.map(f32::to_bits), four.map(f32::to_bits), "{what}");
+                assert_eq!(plain.map(|m| m > 0.0), four.map(|m| m > 0.0), "{what}");
+            }
             out[k] = (s64.is_some(), seen[0] > 0.0);
         }
         out
+    }
+
+    /// Lane 0 of quad `q` against lane 0 of `b` (an A split) in the low half, node `a`
+    /// against lane 0 of `bl` (a B split) in the high half, through the eight-lane test:
+    /// lane 0 of each half, recording margins, then as plain queries run it.
+    ///
+    /// # Safety
+    ///
+    /// The CPU must have AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[allow(unsafe_code)]
+    #[target_feature(enable = "avx2")]
+    unsafe fn eight_lane(
+        q: &Quad,
+        b: &BLanes,
+        a: &TNode,
+        bl: &BLanes,
+        s: f32,
+    ) -> ([f32; 2], [f32; 2]) {
+        // SAFETY: the caller guarantees AVX2.
+        unsafe {
+            let (h1, h2) = (avx::a_split(q, b, 0), avx::b_split(a, bl));
+            let (r1, r2) = avx::separation8::<true>(&h1, &h2, s, 0x11);
+            let (p1, p2) = avx::separation8::<false>(&h1, &h2, s, 0x11);
+            ([r1.0[0], r2.0[0]], [p1.0[0], p2.0[0]])
+        }
     }
 
     fn random_node(rng: &mut Rng, centre: DVec3, size: f64) -> TNode {
