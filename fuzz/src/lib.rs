@@ -286,8 +286,8 @@ pub fn collide_oracle(data: &[u8]) {
 /// hundred bodies, or a crowd of 1,100-1,355 where the grid runs, laid out in a cube or strung
 /// along one axis, near the origin or 10^6 or 10^9 away. The boxes have input-chosen sizes,
 /// some long. The positions come from a generator the input seeds, so a short input makes a
-/// large scene. Then byte-driven edits (moves, teleports, removals, additions, static bodies,
-/// excluded pairs) and queries with a margin. `World::overlapping_pairs` must equal the tested
+/// large scene. Then byte-driven edits (moves, teleports, every body placed anew, removals,
+/// additions, static bodies, excluded pairs) and queries with a margin. `World::overlapping_pairs` must equal the tested
 /// pairs of bodies whose boxes are within the margin, and `overlapping_boxes` the same pairs
 /// on the plain boxes.
 pub fn world_broad(data: &[u8]) {
@@ -354,7 +354,14 @@ pub fn world_broad(data: &[u8]) {
         if !ids.is_empty() {
             let k = (next() % ids.len() as u64) as usize;
             let id = ids[k];
-            match op % 6 {
+            match op % 7 {
+                // Every body anew (incoherent motion: twice in a row, the broad phase finds
+                // that step's pairs with the bodies' own boxes).
+                6 => {
+                    for &id in &ids {
+                        w.set_pose(id, place(&mut next)).expect("finite pose");
+                    }
+                }
                 0 | 1 => {
                     let p = w.pose(id).expect("live");
                     let d = DVec3::new(b.small(), b.small(), b.small()) * 0.05;

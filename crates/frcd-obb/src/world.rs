@@ -260,7 +260,9 @@ struct StepStats {
 ///   dynamic box tree, and queried for new candidates. When more than an eighth of the bodies
 ///   leave at once (incoherent motion, a new margin), every candidate is found afresh by a sweep
 ///   along the axis the centres spread most, or by a uniform grid where many bodies fill a
-///   volume. [`World::teleport`] drops only the teleported body's own pair caches (lazily, by an
+///   volume; from the second such step in a row, with the bodies' own boxes (the step's answer
+///   only: fewer pairs to find, none to filter), and grown boxes again once the motion calms
+///   down. [`World::teleport`] drops only the teleported body's own pair caches (lazily, by an
 ///   epoch, without scanning the pairs).
 /// - **Narrow phase**: static-static and excluded pairs are never queried; pairs whose two poses
 ///   did not change since their last answer are answered from it. The other pairs run in

@@ -513,6 +513,100 @@ fn kept_candidates_equal_all_pairs_through_drift_teleports_and_removals() {
     }
 }
 
+/// Incoherent motion: runs of steps in which every body jumps anew (the second step of a run
+/// on finds its pairs with the bodies' own boxes), broken by calm steps, steps where nothing
+/// moves, bodies coming and going and a margin change in the middle of a run. Every step
+/// equals all pairs of boxes, and the counters show the tight rebuilds ran (none for a single
+/// jump, which keeps grown boxes for the calm steps after it) and that the first calm step after
+/// a run rebuilds the grown-box candidates.
+#[test]
+fn incoherent_runs_find_pairs_with_tight_boxes_and_calm_steps_recover() {
+    let mut rng = StdRng::seed_from_u64(77);
+    let mut w = World::new(WorldOptions::default());
+    let tree = cube();
+    let place = |rng: &mut StdRng| {
+        Pose::new(
+            DVec3::new(
+                rng.random_range(0.0..25.0),
+                rng.random_range(0.0..25.0),
+                rng.random_range(0.0..25.0),
+            ),
+            DQuat::from_rotation_z(rng.random_range(0.0..3.0)),
+        )
+    };
+    let mut ids: Vec<_> = (0..400)
+        .map(|_| w.add_body(tree.clone(), place(&mut rng), false).unwrap())
+        .collect();
+    // Per step: J jump (every body anew), C calm (a third wobble inside their grown boxes),
+    // S still (nothing moves).
+    let plan = "JCCJJJJSCCJJJJJSSCCJJCJJJCC";
+    let mut checked = 0;
+    let mut calm_rebuilds = Vec::new();
+    for (step, what) in plan.chars().enumerate() {
+        match what {
+            'J' => {
+                for &id in &ids {
+                    w.set_pose(id, place(&mut rng)).unwrap();
+                }
+            }
+            'C' => {
+                for &id in ids.iter().skip(step % 3).step_by(3) {
+                    let p = w.pose(id).unwrap();
+                    let d = DVec3::new(0.01, -0.005, 0.0) * if step % 2 == 0 { 1.0 } else { -1.0 };
+                    w.set_pose(id, Pose::new(p.translation + d, p.rotation))
+                        .unwrap();
+                }
+            }
+            _ => {}
+        }
+        if step == 12 || step == 22 {
+            // Bodies come and go in the middle of a run.
+            for _ in 0..5 {
+                let gone = ids.swap_remove(rng.random_range(0..ids.len()));
+                w.remove_body(gone).unwrap();
+            }
+            for _ in 0..3 {
+                ids.push(w.add_body(tree.clone(), place(&mut rng), false).unwrap());
+            }
+        }
+        let margin = if step < 13 { 0.0 } else { 0.3 };
+        let rebuilds = w.broad_stats().rebuilds;
+        let got = w.overlapping_pairs(margin);
+        let want = all_pairs_within(&w, margin);
+        assert_eq!(got, want, "step {step} ({what})");
+        checked += want.len();
+        if what == 'C' {
+            calm_rebuilds.push((step, w.broad_stats().rebuilds - rebuilds));
+        }
+        if what == 'S' {
+            // Nothing moved: no work, whatever the candidates were found with.
+            assert_eq!(w.broad_stats().rebuilds, rebuilds, "step {step}");
+        }
+    }
+    let stats = w.broad_stats();
+    assert!(checked > 3000, "the scene overlaps: {checked} pairs");
+    // Runs JJJJ (steps 3-6), JJJJJ (10-14), JJ (19-20), JJJ (22-24): each run's first jump
+    // rebuilds with grown boxes, the later ones with tight boxes; the margin change at step 13
+    // rebuilds with grown boxes and starts the count again, so step 14 is a first jump too:
+    // 3 + 2 + 1 + 2.
+    assert_eq!(stats.tight_rebuilds, 8, "{stats:?}");
+    // A calm step rebuilds (grown boxes again) exactly when the candidates before it were
+    // tight: after step 6 (a still step between), 20 and 24; not after step 0's first
+    // rebuild, nor after step 14's grown-box rebuild.
+    let want = [
+        (1, 0),
+        (2, 0),
+        (8, 1),
+        (9, 0),
+        (17, 0),
+        (18, 0),
+        (21, 1),
+        (25, 1),
+        (26, 0),
+    ];
+    assert_eq!(calm_rebuilds, want);
+}
+
 /// A slack beyond `MAX_BOX_SLACK_PERCENT` acts as that maximum: the same pairs and the same
 /// broad-phase work as at the maximum (without the cap, grown boxes as large as the scene would
 /// keep about every pair of bodies as a candidate).

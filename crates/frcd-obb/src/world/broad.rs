@@ -70,6 +70,11 @@ pub(super) struct BroadPhase {
     candidates: Vec<(u32, u32)>,
     /// The margin the candidates hold for (its bits); `None` before the first update.
     margin: Option<u64>,
+    /// The candidates were found with the bodies' own boxes, not the grown ones (a rebuild in
+    /// incoherent motion): they are this step's answer, and any later move makes them stale.
+    tight_candidates: bool,
+    /// The last update rebuilt because too many bodies left their grown boxes.
+    incoherent: bool,
     /// Relative growth of the fat boxes.
     slack: f64,
     /// The index of the fat boxes, built at the first step that needs it after a rebuild.
@@ -93,6 +98,10 @@ pub struct BroadStats {
     /// Updates that found every candidate pair afresh (the first, a new margin, or more than
     /// an eighth of the bodies out of their grown boxes).
     pub rebuilds: u64,
+    /// Of the `rebuilds`, those that found the step's pairs with the bodies' own boxes (the
+    /// second step in a row in which more than an eighth of the bodies left their grown boxes;
+    /// such candidates serve that step only).
+    pub tight_rebuilds: u64,
     /// Bodies re-inserted one by one (out of their grown box, added, or removed).
     pub reinserted: u64,
     /// Builds of the dynamic tree those are re-inserted in.
@@ -168,6 +177,11 @@ impl BroadPhase {
         self.update(margin + 0.0);
         let t = &self.tight;
         let c = &self.candidates;
+        if self.tight_candidates {
+            // Found with these very boxes by the same comparisons as `within`.
+            out.extend_from_slice(c);
+            return;
+        }
         out.reserve(c.len() / 2);
         for (k, &(a, b)) in c.iter().enumerate() {
             // The second box of each pair is a random read: ask for it a few pairs ahead.
@@ -183,10 +197,12 @@ impl BroadPhase {
     /// Brings the candidates up to date with the touched slots.
     fn update(&mut self, margin: f64) {
         if self.margin != Some(margin.to_bits()) {
-            return self.rebuild(margin);
+            self.incoherent = false;
+            return self.rebuild(margin, false);
         }
         self.escaped.clear();
         self.gone.clear();
+        let moved = !self.touched.is_empty();
         for &s in &self.touched {
             let i = s as usize;
             self.touched_mark[i] = false;
@@ -200,11 +216,26 @@ impl BroadPhase {
         }
         self.touched.clear();
         let k = self.escaped.len() + self.gone.len();
-        if k == 0 {
+        if k > self.count / REBUILD_FRACTION {
+            // Incoherent motion. A second such step in a row finds the pairs with the bodies'
+            // own boxes: fewer pairs to find and none to filter, where grown-box candidates
+            // would be thrown away at the next step if the motion goes on (a single jump of
+            // every body still gets grown boxes, kept for the calm steps after it).
+            let tight = self.incoherent;
+            self.incoherent = true;
+            return self.rebuild(margin, tight);
+        }
+        self.incoherent = false;
+        if self.tight_candidates {
+            // The motion calmed down: grown-box candidates again, found afresh (stale the
+            // moment anything moved).
+            if moved {
+                self.rebuild(margin, false);
+            }
             return;
         }
-        if k > self.count / REBUILD_FRACTION {
-            return self.rebuild(margin);
+        if k == 0 {
+            return;
         }
         for &s in self.escaped.iter().chain(&self.gone) {
             self.changed[s as usize] = true;
@@ -273,8 +304,10 @@ impl BroadPhase {
         }
     }
 
-    /// Re-grows every fat box and finds every candidate afresh.
-    fn rebuild(&mut self, margin: f64) {
+    /// Re-grows every fat box and finds every candidate afresh: pairs of the fat boxes, or with
+    /// `tight` of the bodies' own boxes (this step's answer, not kept; the fat boxes are still
+    /// grown, to tell at the next update how many bodies left them).
+    fn rebuild(&mut self, margin: f64, tight: bool) {
         for &s in &self.touched {
             self.touched_mark[s as usize] = false;
         }
@@ -284,10 +317,12 @@ impl BroadPhase {
             self.indexed[i] = self.live[i];
             if self.live[i] {
                 self.fat[i] = self.fatten(&self.tight[i]);
-                items.push((self.fat[i], i as u32));
+                items.push((if tight { self.tight[i] } else { self.fat[i] }, i as u32));
             }
         }
         self.candidates = box_pairs(&items, margin);
+        self.tight_candidates = tight;
+        self.stats.tight_rebuilds += u64::from(tight);
         self.margin = Some(margin.to_bits());
         self.tree_built = false;
         self.stats.rebuilds += 1;
