@@ -250,6 +250,7 @@ fn bench_broad_scene(cube: &Arc<ObbTree>, motion: &str, layout: &str, n: usize) 
         })
         .collect();
     let mut times = Vec::new();
+    let (mut set_times, mut box_times) = (Vec::new(), Vec::new());
     let mut parry_times = [Vec::new(), Vec::new()];
     let mut pairs = 0;
     let mut bvh = [
@@ -276,19 +277,34 @@ fn bench_broad_scene(cube: &Arc<ObbTree>, motion: &str, layout: &str, n: usize) 
                 (id, Pose::from_translation(at))
             })
             .collect();
+        let t0 = Instant::now();
         w.set_poses(&updates).expect("valid poses");
+        let frcd_set = t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
         pairs = black_box(w.overlapping_pairs(0.0)).len();
         let frcd = t0.elapsed().as_secs_f64();
-        // The peer on the same boxes (converted outside the timing).
-        let boxes: Vec<parry3d_f64::bounding_volume::Aabb> = ids
+        // The peer's boxes from the same poses, as the World computes them (the body's box
+        // turned and moved, grown by 10^-12 of its magnitude), timed apart: "from poses" adds
+        // this to the peer as `set_poses` is added to frcd.
+        let t0 = Instant::now();
+        let local = cube.aabb();
+        let boxes: Vec<parry3d_f64::bounding_volume::Aabb> = updates
             .iter()
-            .map(|&id| {
-                let b = w.body_aabb(id).expect("live");
+            .map(|(_, pose)| {
+                let b = local.transformed(pose);
+                let mag = b.min.abs().max(b.max.abs()).max_element();
+                let b = b.inflated(mag * 1e-12 + f64::MIN_POSITIVE);
                 let v = |p: DVec3| parry3d_f64::math::Vector::new(p.x, p.y, p.z);
                 parry3d_f64::bounding_volume::Aabb::new(v(b.min), v(b.max))
             })
             .collect();
+        let parry_boxes = t0.elapsed().as_secs_f64();
+        for (&(id, _), b) in updates.iter().zip(&boxes) {
+            let f = w.body_aabb(id).expect("live");
+            let same = [f.min.x, f.min.y, f.min.z, f.max.x, f.max.y, f.max.z]
+                == [b.mins.x, b.mins.y, b.mins.z, b.maxs.x, b.maxs.y, b.maxs.z];
+            assert!(same, "the peer's boxes are the World's");
+        }
         for (p, margin) in [0.0, 0.1].into_iter().enumerate() {
             let t0 = Instant::now();
             if motion == "shuffle" {
@@ -319,6 +335,8 @@ fn bench_broad_scene(cube: &Arc<ObbTree>, motion: &str, layout: &str, n: usize) 
         }
         if k > 1 {
             times.push(frcd);
+            set_times.push(frcd_set);
+            box_times.push(parry_boxes);
         }
     }
     let stats = w.broad_stats();
@@ -327,13 +345,19 @@ fn bench_broad_scene(cube: &Arc<ObbTree>, motion: &str, layout: &str, n: usize) 
         median(parry_times[0].clone()),
         median(parry_times[1].clone()),
     );
+    let (ms, mb) = (median(set_times), median(box_times));
     println!(
-        "world/broad {motion} {layout}: {n} bodies, {pairs} overlapping pairs, frcd {:.3} ms, parry3d-f64 Bvh {:.3} ms tight (parry / frcd {:.2}x), {:.3} ms grown by 0.1 ({:.2}x); frcd re-inserted {:.0} bodies and rebuilt {} times in 12 steps; medians of {} steps (load average {})",
+        "world/broad {motion} {layout}: {n} bodies, {pairs} overlapping pairs, frcd {:.3} ms, parry3d-f64 Bvh {:.3} ms tight (parry / frcd {:.2}x), {:.3} ms grown by 0.1 ({:.2}x); from poses: frcd {:.3} ms (set_poses {:.3}), parry3d-f64 tight {:.3} ms (boxes {:.3}), parry / frcd {:.2}x; frcd re-inserted {:.0} bodies and rebuilt {} times in 12 steps; medians of {} steps (load average {})",
         m * 1e3,
         mp0 * 1e3,
         mp0 / m,
         mp1 * 1e3,
         mp1 / m,
+        (m + ms) * 1e3,
+        ms * 1e3,
+        (mp0 + mb) * 1e3,
+        mb * 1e3,
+        (mp0 + mb) / (m + ms),
         (stats.reinserted - start.reinserted) as f64,
         stats.rebuilds - start.rebuilds,
         times.len(),
