@@ -148,8 +148,9 @@ impl Aabb {
     /// [`Pose::relative_to`] takes it.
     // Inlined across crates: returned through memory, the box's 24-byte corners were read
     // back as 16-byte pieces, which waited for the writes to reach the cache (perf: a
-    // quarter of `World::set_poses`).
-    #[inline]
+    // quarter of `World::set_poses`). `inline(always)`: with the hint alone it stayed out of
+    // line in the World.
+    #[inline(always)]
     pub fn transformed(&self, pose: &Pose) -> Self {
         if self.is_empty() {
             return *self;
