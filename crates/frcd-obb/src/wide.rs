@@ -277,6 +277,8 @@ impl Sat32 {
     /// The f32 test of a query with rotation `m`, translation `t`, f64 slack `slack` and
     /// magnitude `mag` (`|A's mesh| + |B's mesh| + |t|`), or `None` when `mag` lies outside
     /// `[2⁻⁶⁰, 2¹⁰⁰]` or anything is not finite.
+    // Always inlined, built in place in the query's context (see `Ctx::new`).
+    #[inline(always)]
     pub fn new(m: DMat3, t: DVec3, slack: f64, mag: f64) -> Option<Self> {
         let range = 2f64.powi(-60)..=2f64.powi(100);
         if !range.contains(&mag) || !slack.is_finite() || !m.is_finite() || !t.is_finite() {
