@@ -423,7 +423,9 @@ fn box_pairs(boxes: &[(Aabb, u32)], margin: f64) -> Vec<(u32, u32)> {
                 if bj.lo - bi.hi > margin {
                     break;
                 }
-                if apart_across(bi, bj, margin) {
+                // The whole test, not only the axes across: `bj` starts at or after `bi`, but
+                // an inverted `bj` (min > max) may end before `bi` starts.
+                if !within_swept(bi, bj, margin) {
                     continue;
                 }
                 out.push((bi.slot.min(bj.slot), bi.slot.max(bj.slot)));
