@@ -267,33 +267,21 @@ fn canonical_target(p: &Path) -> Option<PathBuf> {
     Some(folder.join(p.file_name()?))
 }
 
+// The integration tests' temp-folder guard, shared with these unit tests rather than written
+// out again.
+#[cfg(test)]
+#[path = "../tests/common/mod.rs"]
+mod test_common;
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// A fresh folder in the system temp folder, unique to this process and test, removed with
-    /// everything in it when the guard drops: at the end of the test, pass or fail.
-    struct TempDir(PathBuf);
+    use super::test_common::TempDir;
 
-    impl std::ops::Deref for TempDir {
-        type Target = Path;
-        fn deref(&self) -> &Path {
-            &self.0
-        }
-    }
-
-    impl Drop for TempDir {
-        fn drop(&mut self) {
-            let _ = std::fs::remove_dir_all(&self.0);
-        }
-    }
-
+    /// A fresh folder `frcd-io-fs-<process>-<name>`, removed when the guard drops.
     fn dir(name: &str) -> TempDir {
-        let d =
-            TempDir(std::env::temp_dir().join(format!("frcd-io-fs-{}-{name}", std::process::id())));
-        let _ = std::fs::remove_dir_all(&*d);
-        std::fs::create_dir_all(&*d).unwrap();
-        d
+        TempDir::new("fs", name)
     }
 
     #[test]
