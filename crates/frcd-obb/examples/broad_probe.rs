@@ -1,7 +1,8 @@
 //! The World's broad phase under drift, for profiling (`perf record`) without criterion:
 //! `n` unit boxes in a cube (about 4 neighbours each), each drifting at its own speed (uniform
 //! in 0 to `speed` per step; a negative speed places every body anew in the cube each step),
-//! median time per step of `overlapping_pairs` and the bodies re-inserted per step.
+//! median time per step of `overlapping_pairs` (and of the `set_poses` before it) and the
+//! bodies re-inserted per step.
 //!
 //! ```text
 //! cargo run --release -p frcd-obb --example broad_probe -- [n] [speed] [steps]
@@ -53,7 +54,7 @@ fn main() {
                 .expect("valid pose")
         })
         .collect();
-    let mut times = Vec::new();
+    let (mut times, mut set_times) = (Vec::new(), Vec::new());
     let start = w.broad_stats();
     for k in 0..steps {
         let up: Vec<_> = ids
@@ -69,19 +70,24 @@ fn main() {
                 (id, Pose::from_translation(at))
             })
             .collect();
+        let t = Instant::now();
         w.set_poses(&up).expect("valid poses");
+        let set = t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
         std::hint::black_box(w.overlapping_pairs(0.0));
         if k > 1 {
             times.push(t.elapsed().as_secs_f64() * 1e3);
+            set_times.push(set);
         }
     }
     let end = w.broad_stats();
     let mean = times.iter().sum::<f64>() / times.len() as f64;
     times.sort_by(f64::total_cmp);
+    set_times.sort_by(f64::total_cmp);
     println!(
-        "{n} bodies, speed {speed}: median {:.2} ms, mean {mean:.2} ms per step, {:.0} re-inserted and {:.2} rebuilds per step",
+        "{n} bodies, speed {speed}: median {:.2} ms, mean {mean:.2} ms per step (set_poses median {:.3} ms), {:.0} re-inserted and {:.2} rebuilds per step",
         times[times.len() / 2],
+        set_times[set_times.len() / 2],
         (end.reinserted - start.reinserted) as f64 / steps as f64,
         (end.rebuilds - start.rebuilds) as f64 / steps as f64,
     );
