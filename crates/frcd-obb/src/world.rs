@@ -3,6 +3,7 @@
 //! or a grid where the boxes crowd a volume, when many do), and a cached, deterministic,
 //! parallel narrow phase whose results are borrowed from the [`World`].
 
+mod boxes4;
 mod boxtree;
 mod broad;
 mod clearance;
@@ -320,7 +321,13 @@ pub struct World {
 // 16-byte pieces that waited for the writes to reach the cache (perf: half of `move_body`).
 #[inline(always)]
 pub(crate) fn world_box(tree: &ObbTree, pose: &Pose) -> Aabb {
-    let b = tree.aabb().transformed(pose);
+    world_box_of(&tree.aabb(), pose)
+}
+
+/// [`world_box`] of a tree whose box is `local`.
+#[inline(always)]
+pub(crate) fn world_box_of(local: &Aabb, pose: &Pose) -> Aabb {
+    let b = local.transformed(pose);
     let mag = b.min.abs().max(b.max.abs()).max_element();
     b.inflated(mag * 1e-12 + f64::MIN_POSITIVE)
 }
@@ -506,6 +513,7 @@ impl World {
         Ok(())
     }
 
+    #[inline(always)]
     fn move_body(&mut self, id: BodyId, pose: Pose) {
         let body = self.slots[id.index() as usize]
             .body
@@ -523,6 +531,21 @@ impl World {
         }
     }
 
+    /// [`World::move_body`] with the body's world box for `pose` already computed.
+    #[inline(always)]
+    fn place_body(&mut self, id: BodyId, pose: Pose, aabb: Aabb) {
+        let body = self.slots[id.index() as usize]
+            .body
+            .as_deref_mut()
+            .expect("checked by the caller");
+        if body.pose != pose {
+            body.pose = pose;
+            body.version += 1;
+            body.aabb = aabb;
+            self.broad.set(id.index(), aabb);
+        }
+    }
+
     /// Moves many bodies at once. Every handle and pose is checked first: on an error nothing
     /// has moved.
     pub fn set_poses(&mut self, updates: &[(BodyId, Pose)]) -> Result<(), WorldError> {
@@ -532,10 +555,67 @@ impl World {
                 return Err(WorldError::InvalidPose { id, pose });
             }
         }
-        for &(id, pose) in updates {
+        #[cfg(target_arch = "x86_64")]
+        if crate::isa::has_avx2() {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            #[allow(unsafe_code)]
+            unsafe {
+                self.move_bodies_avx2(updates)
+            };
+            return Ok(());
+        }
+        self.move_bodies::<[f64; 4]>(updates);
+        Ok(())
+    }
+
+    /// Moves the bodies of `updates` (all checked), in order: four world boxes are computed at
+    /// once ([`boxes4::world_boxes4`], the same bits as one at a time), then the four moves
+    /// are made one after the other (so a body named twice ends at its last pose, as with
+    /// one update at a time).
+    #[inline(always)]
+    fn move_bodies<V: boxes4::Lanes>(&mut self, updates: &[(BodyId, Pose)]) {
+        let mut chunks = updates.chunks_exact(4);
+        for chunk in &mut chunks {
+            let mut local = [Aabb::EMPTY; 4];
+            let mut poses = [Pose::IDENTITY; 4];
+            let mut boxed = true;
+            for (k, &(id, pose)) in chunk.iter().enumerate() {
+                let body = self.slots[id.index() as usize]
+                    .body
+                    .as_deref()
+                    .expect("checked by the caller");
+                local[k] = body.tree.aabb();
+                poses[k] = pose;
+                boxed &= !local[k].is_empty();
+            }
+            if boxed {
+                let boxes = boxes4::world_boxes4::<V>(&local, &poses);
+                for (&(id, pose), aabb) in chunk.iter().zip(boxes) {
+                    self.place_body(id, pose, aabb);
+                }
+            } else {
+                // An empty local box maps to itself: one body at a time.
+                for &(id, pose) in chunk {
+                    self.move_body(id, pose);
+                }
+            }
+        }
+        for &(id, pose) in chunks.remainder() {
             self.move_body(id, pose);
         }
-        Ok(())
+    }
+
+    /// [`World::move_bodies`] built with AVX2 (the same IEEE operations: no FMA, so the same
+    /// boxes bit for bit; the four lanes of [`boxes4::world_boxes4`] take one register).
+    ///
+    /// # Safety
+    ///
+    /// The CPU must have AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[allow(unsafe_code)]
+    unsafe fn move_bodies_avx2(&mut self, updates: &[(BodyId, Pose)]) {
+        self.move_bodies::<boxes4::avx::F64x4>(updates);
     }
 
     /// Moves a body far (incoherent motion): like [`World::set_pose`], and the coherence caches

@@ -803,3 +803,102 @@ fn nearly_unit_quaternions_keep_world_boxes_around_their_bodies() {
         }
     }
 }
+
+/// `set_poses` (which computes four world boxes at once) leaves a World exactly as one
+/// `set_pose` per update does: the same poses, the same boxes bit for bit, the same pairs and
+/// contacts. The batches name some bodies twice (in the same group of four and across
+/// groups), repeat unchanged poses, use off-unit quaternions, and leave remainders of one to
+/// three updates; the bodies use meshes of different sizes.
+#[test]
+fn batched_poses_equal_one_update_at_a_time() {
+    let mut rng = StdRng::seed_from_u64(0xB0C5);
+    let trees = [
+        cube(),
+        Arc::new(ObbTree::build(
+            &shapes::icosphere(0.7, 1),
+            &BuildOptions::default(),
+        )),
+        Arc::new(ObbTree::build(
+            &shapes::cuboid(DVec3::new(3.0, 0.2, 0.5)),
+            &BuildOptions::default(),
+        )),
+    ];
+    let (mut batched, mut single) = (
+        World::new(WorldOptions::default()),
+        World::new(WorldOptions::default()),
+    );
+    let mut ids = Vec::new();
+    for k in 0..23 {
+        let pose = random_pose(&mut rng, 6.0);
+        let a = batched
+            .add_body(trees[k % 3].clone(), pose, k % 7 == 0)
+            .unwrap();
+        let b = single
+            .add_body(trees[k % 3].clone(), pose, k % 7 == 0)
+            .unwrap();
+        ids.push((a, b));
+    }
+    for step in 0..40 {
+        let len = rng.random_range(0..(ids.len() + 6));
+        let mut batch_a = Vec::new();
+        let mut batch_b = Vec::new();
+        for _ in 0..len {
+            let (a, b) = ids[rng.random_range(0..ids.len())];
+            let pose = match rng.random_range(0..4) {
+                // The pose it has (nothing moves).
+                0 => batched.pose(a).unwrap(),
+                // A quaternion off unit length, inside the World's tolerance.
+                1 => {
+                    let p = random_pose(&mut rng, 6.0);
+                    Pose {
+                        translation: p.translation,
+                        rotation: p.rotation * (1.0 + 3e-10),
+                    }
+                }
+                _ => random_pose(&mut rng, 6.0),
+            };
+            batch_a.push((a, pose));
+            batch_b.push((b, pose));
+        }
+        // A body named twice in a row, inside one group of four.
+        if let [.., (a, _), (b, _)] = batch_a[..] {
+            let again = random_pose(&mut rng, 6.0);
+            batch_a.push((a, again));
+            batch_a.push((b, again));
+            let n = batch_b.len();
+            let (a2, b2) = (batch_b[n - 2].0, batch_b[n - 1].0);
+            batch_b.push((a2, again));
+            batch_b.push((b2, again));
+        }
+        batched.set_poses(&batch_a).unwrap();
+        for &(b, pose) in &batch_b {
+            single.set_pose(b, pose).unwrap();
+        }
+        for &(a, b) in &ids {
+            assert_eq!(batched.pose(a), single.pose(b), "step {step}");
+            let (ba, bb) = (batched.body_aabb(a).unwrap(), single.body_aabb(b).unwrap());
+            assert_eq!(
+                (
+                    ba.min.to_array().map(f64::to_bits),
+                    ba.max.to_array().map(f64::to_bits)
+                ),
+                (
+                    bb.min.to_array().map(f64::to_bits),
+                    bb.max.to_array().map(f64::to_bits)
+                ),
+                "step {step}: the box of {a:?}"
+            );
+        }
+        let index = |w: &World, list: Vec<_>| -> Vec<(usize, usize)> {
+            let order: Vec<_> = w.bodies().collect();
+            let at = |id| order.iter().position(|&x| x == id).unwrap();
+            list.into_iter().map(|(x, y)| (at(x), at(y))).collect()
+        };
+        let pa = batched.overlapping_pairs(0.0);
+        let pb = single.overlapping_pairs(0.0);
+        assert_eq!(index(&batched, pa), index(&single, pb), "step {step}");
+        let ca = batched.step().contacts.len();
+        let cb = single.step().contacts.len();
+        assert_eq!(ca, cb, "step {step}");
+    }
+}
