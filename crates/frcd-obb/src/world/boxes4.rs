@@ -302,7 +302,7 @@ mod tests {
             }
             for four in builds {
                 for k in 0..4 {
-                    let one = super::super::world_box_of(&local[k], &poses[k]);
+                    let one = super::super::world_box(&local[k], &poses[k]);
                     for a in 0..3 {
                         assert!(
                             same(four[k].min[a], one.min[a]) && same(four[k].max[a], one.max[a]),

@@ -152,6 +152,12 @@ impl BroadPhase {
         self.tight[i] = b;
     }
 
+    /// Slot `i`'s box, as last set (valid while the slot holds a body).
+    #[inline]
+    pub(super) fn tight_box(&self, i: u32) -> &Aabb {
+        &self.tight[i as usize]
+    }
+
     /// Slot `i`'s body is gone.
     pub(super) fn remove(&mut self, i: u32) {
         self.touch(i);
