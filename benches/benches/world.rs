@@ -19,7 +19,7 @@
 //! small boxes with about 4 neighbours each: scattered through a cube (where a sweep compares
 //! every box with about n^(2/3) others) and strung along y, at 4,096 to 65,536 bodies
 //! (`FRCD_WORLD_BROAD_MAX` raises the top, e.g. 262144), under three motions
-//! (`FRCD_WORLD_MOTIONS=wobble,drift,shuffle`, see `bench_broad`). Beside it, on the same boxes
+//! (`FRCD_WORLD_MOTIONS=wobble,drift,drift-long,shuffle`, see `bench_broad`). Beside it, on the same boxes
 //! in the same steps, parry3d-f64's incremental BVH as rapier drives it, with tight and with
 //! grown boxes, its pair count checked equal.
 //! `FRCD_WORLD_ONLY=broad|step` runs one part.
@@ -179,8 +179,11 @@ fn load() -> String {
 /// incremental BVH on the same boxes, under three motions:
 /// - `wobble`: every body moves a little about a fixed place (coherent; the bodies stay in
 ///   their grown boxes);
-/// - `drift`: every body moves on at its own speed (0 to 0.02 per step), so about a tenth of
-///   them leave their grown boxes each step;
+/// - `drift`: every body moves on at its own speed (0 to 0.02 per step), so a few % of them
+///   leave their grown boxes each step; 12 steps, right after the first build, where each
+///   body leaves its grown box at most once;
+/// - `drift-long`: the same motion for 60 steps, timed over the last 40: the steady state of a
+///   long run, where bodies leave their (re-grown) boxes again and again;
 /// - `shuffle`: every body is placed anew each step (incoherent: every candidate found afresh).
 ///
 /// parry3d-f64 runs as Rapier drives it (`insert_or_update_partially` for every box,
@@ -197,7 +200,8 @@ fn bench_broad() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(65_536);
-    let motions = std::env::var("FRCD_WORLD_MOTIONS").unwrap_or("wobble,drift,shuffle".into());
+    let motions =
+        std::env::var("FRCD_WORLD_MOTIONS").unwrap_or("wobble,drift,drift-long,shuffle".into());
     for motion in motions.split(',') {
         for layout in ["cube", "along y"] {
             if motion != "wobble" && layout != "cube" {
@@ -259,7 +263,13 @@ fn bench_broad_scene(cube: &Arc<ObbTree>, motion: &str, layout: &str, n: usize) 
     ];
     let mut workspace = parry3d_f64::partitioning::BvhWorkspace::default();
     let start = w.broad_stats();
-    for k in 0..12 {
+    // Steps run, and steps left out of the medians (the first build, a long run's start).
+    let (steps, skip) = if motion == "drift-long" {
+        (60, 20)
+    } else {
+        (12, 2)
+    };
+    for k in 0..steps {
         let t = k as f64 * 0.05;
         let updates: Vec<(BodyId, Pose)> = ids
             .iter()
@@ -271,7 +281,7 @@ fn bench_broad_scene(cube: &Arc<ObbTree>, motion: &str, layout: &str, n: usize) 
                         let phase = i as f64 * 0.37 + t;
                         c + 0.05 * DVec3::new(phase.sin(), phase.cos(), (2.0 * phase).sin())
                     }
-                    "drift" => c + velocities[i] * k as f64,
+                    "drift" | "drift-long" => c + velocities[i] * k as f64,
                     _ => place(&mut rng),
                 };
                 (id, Pose::from_translation(at))
@@ -329,11 +339,11 @@ fn bench_broad_scene(cube: &Arc<ObbTree>, motion: &str, layout: &str, n: usize) 
             });
             let parry = t0.elapsed().as_secs_f64();
             assert_eq!(peer_pairs, pairs, "parry3d-f64 finds other pairs");
-            if k > 1 {
+            if k >= skip {
                 parry_times[p].push(parry);
             }
         }
-        if k > 1 {
+        if k >= skip {
             times.push(frcd);
             set_times.push(frcd_set);
             box_times.push(parry_boxes);
@@ -347,7 +357,7 @@ fn bench_broad_scene(cube: &Arc<ObbTree>, motion: &str, layout: &str, n: usize) 
     );
     let (ms, mb) = (median(set_times), median(box_times));
     println!(
-        "world/broad {motion} {layout}: {n} bodies, {pairs} overlapping pairs, frcd {:.3} ms, parry3d-f64 Bvh {:.3} ms tight (parry / frcd {:.2}x), {:.3} ms grown by 0.1 ({:.2}x); from poses: frcd {:.3} ms (set_poses {:.3}), parry3d-f64 tight {:.3} ms (boxes {:.3}), parry / frcd {:.2}x; frcd re-inserted {:.0} bodies and rebuilt {} times in 12 steps; medians of {} steps (load average {})",
+        "world/broad {motion} {layout}: {n} bodies, {pairs} overlapping pairs, frcd {:.3} ms, parry3d-f64 Bvh {:.3} ms tight (parry / frcd {:.2}x), {:.3} ms grown by 0.1 ({:.2}x); from poses: frcd {:.3} ms (set_poses {:.3}), parry3d-f64 tight {:.3} ms (boxes {:.3}), parry / frcd {:.2}x; frcd re-inserted {:.0} bodies and rebuilt {} times in {steps} steps; medians of {} steps (load average {})",
         m * 1e3,
         mp0 * 1e3,
         mp0 / m,
