@@ -87,6 +87,11 @@ pub(super) struct BroadPhase {
     stacks: Vec<Vec<u32>>,
     query_boxes: Vec<Aabb>,
     found: Vec<(u32, u32)>,
+    /// A rebuild's boxes and its pair finder's buffers, kept from rebuild to rebuild.
+    rebuild_items: Vec<(Aabb, u32)>,
+    pair_scratch: PairScratch,
+    /// The buffer the next merge of new candidates writes into.
+    merge_spare: Vec<(u32, u32)>,
     /// Work counters since the world was made.
     pub(super) stats: BroadStats,
 }
@@ -342,8 +347,10 @@ impl BroadPhase {
         }
         if !self.found.is_empty() {
             self.found.sort_unstable();
-            let old = std::mem::take(&mut self.candidates);
-            self.candidates = merge_sorted(&old, &self.found);
+            // Merged into the last merge's buffer (kept, like every buffer of a step), which
+            // then holds the old list for the next merge.
+            merge_sorted(&self.candidates, &self.found, &mut self.merge_spare);
+            std::mem::swap(&mut self.candidates, &mut self.merge_spare);
         }
     }
 
@@ -355,7 +362,11 @@ impl BroadPhase {
             self.touched_mark[s as usize] = false;
         }
         self.touched.clear();
-        let mut items = Vec::with_capacity(self.count);
+        // Every buffer kept from the last rebuild: an incoherent run rebuilds every step, and
+        // allocating them afresh made each step fault in new pages wherever the allocator
+        // gave the memory back to the system (up to 40 % of a step, `cpu-core.md`).
+        let mut items = std::mem::take(&mut self.rebuild_items);
+        items.clear();
         for i in 0..self.live.len() {
             self.indexed[i] = self.live[i];
             if self.live[i] {
@@ -363,7 +374,8 @@ impl BroadPhase {
                 items.push((if tight { self.tight[i] } else { self.fat[i] }, i as u32));
             }
         }
-        self.candidates = box_pairs(&items, margin);
+        box_pairs(&items, margin, &mut self.pair_scratch, &mut self.candidates);
+        self.rebuild_items = items;
         self.tight_candidates = tight;
         self.stats.tight_rebuilds += u64::from(tight);
         self.margin = Some(margin.to_bits());
@@ -429,9 +441,10 @@ pub(super) fn prefetch<T>(x: &T) {
     let _ = x;
 }
 
-/// Two sorted lists merged (duplicates kept).
-fn merge_sorted(a: &[(u32, u32)], b: &[(u32, u32)]) -> Vec<(u32, u32)> {
-    let mut out = Vec::with_capacity(a.len() + b.len());
+/// Two sorted lists merged into `out` (duplicates kept).
+fn merge_sorted(a: &[(u32, u32)], b: &[(u32, u32)], out: &mut Vec<(u32, u32)>) {
+    out.clear();
+    out.reserve(a.len() + b.len());
     let (mut x, mut y) = (0, 0);
     while x < a.len() && y < b.len() {
         if a[x] <= b[y] {
@@ -444,22 +457,30 @@ fn merge_sorted(a: &[(u32, u32)], b: &[(u32, u32)]) -> Vec<(u32, u32)> {
     }
     out.extend_from_slice(&a[x..]);
     out.extend_from_slice(&b[y..]);
-    out
 }
 
 /// Every pair of `boxes` (`(box, id)`) within `margin` on every axis, as `(lower id, higher
 /// id)`, sorted: a sweep along the centres' widest axis, or a uniform grid where a sample
 /// shows the sweep would compare each box with more than [`GRID_FROM`] others (bodies filling
 /// a volume: a box shares its range along any one axis with about n^(2/3) others).
-fn box_pairs(boxes: &[(Aabb, u32)], margin: f64) -> Vec<(u32, u32)> {
+fn box_pairs(
+    boxes: &[(Aabb, u32)],
+    margin: f64,
+    scratch: &mut PairScratch,
+    out: &mut Vec<(u32, u32)>,
+) {
+    out.clear();
     let var = frcd_geom::centre_variance(boxes.iter().map(|(b, _)| b));
     let axis = (1..3).fold(0, |best, a| if var[a] > var[best] { a } else { best });
-    let mut s: Vec<Swept> = boxes.iter().map(|(b, i)| Swept::new(b, *i, axis)).collect();
+    let s = &mut scratch.swept;
+    s.clear();
+    s.extend(boxes.iter().map(|(b, i)| Swept::new(b, *i, axis)));
+    // Sorted for the grid too: its cells then read nearby boxes (without it the grid was
+    // 4-7 % slower at 65,536 boxes).
     s.sort_unstable_by(Swept::cmp);
-    let mut out = Vec::new();
     if !(s.len() >= GRID_MIN_BODIES
-        && sampled_sweep_length(&s, margin) > GRID_FROM
-        && grid_pairs(&s, margin, &mut out))
+        && sampled_sweep_length(s, margin) > GRID_FROM
+        && grid_pairs(s, margin, out, &mut scratch.grid))
     {
         for (p, bi) in s.iter().enumerate() {
             for bj in &s[p + 1..] {
@@ -476,7 +497,23 @@ fn box_pairs(boxes: &[(Aabb, u32)], margin: f64) -> Vec<(u32, u32)> {
         }
     }
     out.sort_unstable();
-    out
+}
+
+/// The buffers of [`box_pairs`], kept by the broad phase from one rebuild to the next.
+#[derive(Debug, Default)]
+pub(super) struct PairScratch {
+    swept: Vec<Swept>,
+    grid: GridScratch,
+}
+
+/// The buffers of [`grid_pairs`].
+#[derive(Debug, Default)]
+struct GridScratch {
+    sides: Vec<f64>,
+    big: Vec<u32>,
+    entries: Vec<(u64, u32)>,
+    sorted: Vec<(u64, u32)>,
+    next: Vec<u32>,
 }
 
 /// Boxes the sweep may compare each box with, on average, before the grid takes over.
@@ -526,7 +563,7 @@ fn within_swept(a: &Swept, b: &Swept, margin: f64) -> bool {
 /// pushed) where no grid can be laid out or it would not pay (non-finite boxes, more than 2^21
 /// cells along an axis, more than [`GRID_ENTRIES`] entries per box, many long boxes): the
 /// caller sweeps.
-fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
+fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>, g: &mut GridScratch) -> bool {
     let up = |x: f64| {
         let g = x + margin;
         g + (g.abs() + margin) * (4.0 * f64::EPSILON)
@@ -537,13 +574,12 @@ fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
             [up(b.hi), up(b.rest[1]), up(b.rest[3])],
         )
     };
-    let mut sides: Vec<f64> = s
-        .iter()
-        .map(|b| {
-            let (lo, hi) = cover(b);
-            (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max)
-        })
-        .collect();
+    let sides = &mut g.sides;
+    sides.clear();
+    sides.extend(s.iter().map(|b| {
+        let (lo, hi) = cover(b);
+        (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max)
+    }));
     let mid = sides.len() / 2;
     let (_, median, _) = sides.select_nth_unstable_by(mid, f64::total_cmp);
     let h = 2.0 * *median;
@@ -586,7 +622,8 @@ fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
     // `within_swept` still pairs), go to the all-pairs list.
     let listed =
         |c0: [u64; 3], c1: [u64; 3]| (0..3).any(|k| c1[k] < c0[k] || c1[k] - c0[k] >= GRID_SPAN);
-    let mut big: Vec<u32> = Vec::new();
+    let big = &mut g.big;
+    big.clear();
     let mut total = 0u64;
     for (i, b) in s.iter().enumerate() {
         let (c0, c1) = ranges(b);
@@ -599,7 +636,9 @@ fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
     if total > GRID_ENTRIES * s.len() as u64 || big.len() > (s.len() / 64).max(64) {
         return false;
     }
-    let mut entries: Vec<(u64, u32)> = Vec::with_capacity(total as usize);
+    let entries = &mut g.entries;
+    entries.clear();
+    entries.reserve(total as usize);
     for (i, b) in s.iter().enumerate() {
         let (c0, c1) = ranges(b);
         if listed(c0, c1) {
@@ -616,8 +655,9 @@ fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
     // In cell order, ties by box: a counting sort where the cells are few next to the entries
     // (a crowded volume, the grid's use: O(n) against the sort's O(n log n)), else a sort. The
     // same order either way (the entries were pushed by increasing box index).
-    let entries = if cell_count <= 4 * entries.len() as u64 + 1024 {
-        counting_sort_by_cell(&entries, cell_count as usize)
+    let entries: &[(u64, u32)] = if cell_count <= 4 * entries.len() as u64 + 1024 {
+        counting_sort_by_cell(entries, cell_count as usize, &mut g.next, &mut g.sorted);
+        &g.sorted
     } else {
         entries.sort_unstable();
         entries
@@ -676,21 +716,27 @@ fn grid_pairs(s: &[Swept], margin: f64, out: &mut Vec<(u32, u32)>) -> bool {
 
 /// `entries` (cell below `cells`, pushed in increasing box order) stably ordered by cell: a
 /// counting sort, O(`entries.len()` + `cells`), reading the entries in order.
-fn counting_sort_by_cell(entries: &[(u64, u32)], cells: usize) -> Vec<(u64, u32)> {
-    let mut next = vec![0u32; cells + 1];
+fn counting_sort_by_cell(
+    entries: &[(u64, u32)],
+    cells: usize,
+    next: &mut Vec<u32>,
+    sorted: &mut Vec<(u64, u32)>,
+) {
+    next.clear();
+    next.resize(cells + 1, 0);
     for e in entries {
         next[e.0 as usize + 1] += 1;
     }
     for c in 1..next.len() {
         next[c] += next[c - 1];
     }
-    let mut sorted = vec![(0u64, 0u32); entries.len()];
+    sorted.clear();
+    sorted.resize(entries.len(), (0, 0));
     for &e in entries {
         let at = &mut next[e.0 as usize];
         sorted[*at as usize] = e;
         *at += 1;
     }
-    sorted
 }
 
 /// Cells a box may cover along one axis before it leaves the grid for the all-pairs list.
@@ -718,7 +764,14 @@ pub fn overlapping_boxes(boxes: &[Aabb], margin: f64) -> Vec<(u32, u32)> {
         .enumerate()
         .map(|(i, b)| (*b, i as u32))
         .collect();
-    box_pairs(&tagged, margin.max(0.0))
+    let mut out = Vec::new();
+    box_pairs(
+        &tagged,
+        margin.max(0.0),
+        &mut PairScratch::default(),
+        &mut out,
+    );
+    out
 }
 
 #[cfg(test)]
@@ -741,8 +794,16 @@ mod tests {
         }
         let mut want = entries.clone();
         want.sort_unstable();
-        assert_eq!(counting_sort_by_cell(&entries, 500), want);
-        assert!(counting_sort_by_cell(&[], 3).is_empty());
+        let (mut next, mut sorted) = (Vec::new(), Vec::new());
+        counting_sort_by_cell(&entries, 500, &mut next, &mut sorted);
+        assert_eq!(sorted, want);
+        // Buffers reused from a larger sort give the same.
+        counting_sort_by_cell(&entries[..700], 500, &mut next, &mut sorted);
+        let mut part = entries[..700].to_vec();
+        part.sort_unstable();
+        assert_eq!(sorted, part);
+        counting_sort_by_cell(&[], 3, &mut next, &mut sorted);
+        assert!(sorted.is_empty());
     }
 
     fn unit_at(x: f64, y: f64) -> Aabb {
