@@ -312,6 +312,9 @@ pub struct World {
     pairs: Vec<PairEntry>,
     /// An empty list whose allocation the next step reuses for its pairs.
     spare: Vec<PairEntry>,
+    /// The broad phase's slot pairs and the step's candidate pairs, kept between calls.
+    raw_pairs: Vec<(u32, u32)>,
+    candidate_pairs: Vec<(BodyId, BodyId)>,
     /// Indices into `pairs` of the interfering pairs of the last step.
     contacts: Vec<u32>,
     clearances: Vec<Clearance>,
@@ -354,6 +357,8 @@ impl World {
             ),
             pairs: Vec::new(),
             spare: Vec::new(),
+            raw_pairs: Vec::new(),
+            candidate_pairs: Vec::new(),
             contacts: Vec::new(),
             clearances: Vec::new(),
             clearance: None,
@@ -763,9 +768,38 @@ impl World {
     /// `frcd-hybrid`): the tested body pairs whose world boxes, each grown by `margin / 2`,
     /// overlap — every pair closer than `margin` among them. Sorted by slot index, `a < b`.
     pub fn overlapping_pairs(&mut self, margin: f64) -> Vec<(BodyId, BodyId)> {
-        let mut raw = Vec::new();
+        let mut out = Vec::new();
+        self.overlapping_pairs_into(margin, &mut out);
+        out
+    }
+
+    /// [`World::overlapping_pairs`] written into `out` (cleared first), so that a caller that
+    /// runs it every frame keeps one allocation.
+    ///
+    /// ```
+    /// use frcd_geom::{DVec3, Pose, shapes};
+    /// use frcd_obb::{BuildOptions, ObbTree, World, WorldOptions};
+    /// use std::sync::Arc;
+    ///
+    /// let cube = Arc::new(ObbTree::build(&shapes::cuboid(DVec3::ONE), &BuildOptions::default()));
+    /// let mut w = World::new(WorldOptions::default());
+    /// let a = w.add_body(cube.clone(), Pose::IDENTITY, false)?;
+    /// let b = w.add_body(cube, Pose::from_translation(DVec3::X), false)?;
+    /// let mut pairs = Vec::new();
+    /// for frame in 0..3 {
+    ///     w.set_pose(b, Pose::from_translation(DVec3::X * (1.0 + frame as f64)))?;
+    ///     w.overlapping_pairs_into(0.0, &mut pairs);
+    ///     assert_eq!(pairs, if frame < 2 { vec![(a, b)] } else { vec![] });
+    /// }
+    /// # Ok::<(), frcd_obb::WorldError>(())
+    /// ```
+    pub fn overlapping_pairs_into(&mut self, margin: f64, out: &mut Vec<(BodyId, BodyId)>) {
+        out.clear();
+        // The broad phase's slot pairs, in a list kept from call to call.
+        let mut raw = std::mem::take(&mut self.raw_pairs);
+        raw.clear();
         self.broad.pairs(margin.max(0.0), &mut raw);
-        let mut out = Vec::with_capacity(raw.len());
+        out.reserve(raw.len());
         for (k, &(i, j)) in raw.iter().enumerate() {
             // The second slot of each pair is a random read: ask for it a few pairs ahead.
             if let Some(&(_, ahead)) = raw.get(k + broad::PREFETCH_AHEAD) {
@@ -776,7 +810,7 @@ impl World {
                 out.push((a, b));
             }
         }
-        out
+        self.raw_pairs = raw;
     }
 
     fn pair_filter(&self, a: BodyId, b: BodyId) -> bool {
@@ -798,7 +832,8 @@ impl World {
     pub fn step(&mut self) -> StepReport<'_> {
         let t_start = Instant::now();
         let margin = self.max_clearance().unwrap_or(0.0);
-        let cands = self.overlapping_pairs(margin);
+        let mut cands = std::mem::take(&mut self.candidate_pairs);
+        self.overlapping_pairs_into(margin, &mut cands);
         // Merge last step's states (sorted like `cands`) into this step's work list (both
         // allocations are kept from step to step).
         let mut old_pairs = std::mem::take(&mut self.pairs);
@@ -806,7 +841,7 @@ impl World {
         let mut work: Vec<PairEntry> = std::mem::take(&mut self.spare);
         work.clear();
         work.reserve(cands.len());
-        for (a, b) in cands {
+        for &(a, b) in &cands {
             let (ia, ib) = (a.index(), b.index());
             let (box_a, box_b) = (self.broad.tight_box(ia), self.broad.tight_box(ib));
             let overlap = box_a.intersects(box_b);
@@ -852,6 +887,7 @@ impl World {
         }
         drop(old);
         self.spare = old_pairs;
+        self.candidate_pairs = cands;
         let slots = &self.slots;
         let placements = &self.placements;
         let options = self.options;

@@ -902,3 +902,41 @@ fn batched_poses_equal_one_update_at_a_time() {
         assert_eq!(ca, cb, "step {step}");
     }
 }
+
+/// `overlapping_pairs_into` gives what `overlapping_pairs` gives, into the caller's list
+/// (cleared first, its allocation kept), through moves, removals and additions.
+#[test]
+fn pairs_into_a_kept_list_equal_the_returned_ones() {
+    let mut rng = StdRng::seed_from_u64(0x1470);
+    let mut w = World::new(WorldOptions::default());
+    let mut ids: Vec<_> = (0..60)
+        .map(|_| {
+            w.add_body(cube(), random_pose(&mut rng, 5.0), false)
+                .unwrap()
+        })
+        .collect();
+    let mut kept = vec![(ids[0], ids[1]); 500];
+    for step in 0..30 {
+        for &id in ids.iter().step_by(1 + step % 4) {
+            w.set_pose(id, random_pose(&mut rng, 5.0)).unwrap();
+        }
+        if step % 7 == 3 {
+            w.remove_body(ids.swap_remove(step % ids.len())).unwrap();
+            ids.push(
+                w.add_body(cube(), random_pose(&mut rng, 5.0), false)
+                    .unwrap(),
+            );
+        }
+        let margin = [0.0, 0.3][step % 2];
+        let capacity = kept.capacity();
+        w.overlapping_pairs_into(margin, &mut kept);
+        let returned = w.overlapping_pairs(margin);
+        assert_eq!(kept, returned, "step {step}");
+        assert!(!returned.is_empty(), "step {step}: the scene has pairs");
+        assert_eq!(
+            kept.capacity(),
+            capacity,
+            "the list is reused, not replaced"
+        );
+    }
+}
