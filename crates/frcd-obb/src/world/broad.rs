@@ -477,7 +477,7 @@ fn box_pairs(
     s.extend(boxes.iter().map(|(b, i)| Swept::new(b, *i, axis)));
     // Sorted for the grid too: its cells then read nearby boxes (without it the grid was
     // 4-7 % slower at 65,536 boxes).
-    s.sort_unstable_by(Swept::cmp);
+    sort_swept(s, &mut scratch.radix);
     if !(s.len() >= GRID_MIN_BODIES
         && sampled_sweep_length(s, margin) > GRID_FROM
         && grid_pairs(s, margin, out, &mut scratch.grid))
@@ -503,7 +503,69 @@ fn box_pairs(
 #[derive(Debug, Default)]
 pub(super) struct PairScratch {
     swept: Vec<Swept>,
+    radix: RadixScratch,
     grid: GridScratch,
+}
+
+/// The buffers of [`sort_swept`].
+#[derive(Debug, Default)]
+struct RadixScratch {
+    keys: Vec<(u64, u32)>,
+    other: Vec<(u64, u32)>,
+    swept: Vec<Swept>,
+}
+
+/// Below this many boxes [`sort_swept`] calls the comparison sort.
+const RADIX_MIN: usize = 512;
+
+/// `s` in the order of [`Swept::cmp`], for boxes given in increasing slot order (as every
+/// caller gives them): a stable radix sort of the lower bounds' total-order keys, eleven bits
+/// a pass (passes where every key has the same digit are skipped), then one permutation of
+/// the boxes. Stable, so equal lower bounds stay in slot order, as `Swept::cmp` puts them.
+/// (The comparison sort of the 56-byte boxes was about 15 % of a rebuild of 4,096 boxes.)
+fn sort_swept(s: &mut Vec<Swept>, r: &mut RadixScratch) {
+    let n = s.len();
+    debug_assert!(s.windows(2).all(|w| w[0].slot < w[1].slot));
+    if n < RADIX_MIN {
+        s.sort_unstable_by(Swept::cmp);
+        return;
+    }
+    // `f64::total_cmp`'s order as unsigned integers: negative values (sign bit set) reversed
+    // below the positive ones.
+    let key = |x: f64| {
+        let b = x.to_bits();
+        if b >> 63 == 1 { !b } else { b | 1 << 63 }
+    };
+    let (keys, other) = (&mut r.keys, &mut r.other);
+    keys.clear();
+    keys.extend(s.iter().enumerate().map(|(i, b)| (key(b.lo), i as u32)));
+    other.clear();
+    other.resize(n, (0, 0));
+    let mut count = [0u32; 2048];
+    for shift in (0..64).step_by(11) {
+        count.fill(0);
+        for &(k, _) in keys.iter() {
+            count[(k >> shift) as usize & 2047] += 1;
+        }
+        if count.iter().any(|&c| c as usize == n) {
+            continue;
+        }
+        let mut at = 0u32;
+        for c in count.iter_mut() {
+            let here = *c;
+            *c = at;
+            at += here;
+        }
+        for &e in keys.iter() {
+            let d = (e.0 >> shift) as usize & 2047;
+            other[count[d] as usize] = e;
+            count[d] += 1;
+        }
+        std::mem::swap(keys, other);
+    }
+    r.swept.clear();
+    r.swept.extend(keys.iter().map(|&(_, i)| s[i as usize]));
+    std::mem::swap(s, &mut r.swept);
 }
 
 /// The buffers of [`grid_pairs`].
@@ -804,6 +866,55 @@ mod tests {
         assert_eq!(sorted, part);
         counting_sort_by_cell(&[], 3, &mut next, &mut sorted);
         assert!(sorted.is_empty());
+    }
+
+    /// The radix sort of the swept boxes gives the comparison sort's order, on a few hundred
+    /// to many thousand boxes with ties, signed zeros, infinities and NaN lower bounds.
+    #[test]
+    fn radix_sort_of_swept_boxes_equals_the_sort() {
+        let mut x = 99u64;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let mut r = RadixScratch::default();
+        for n in [0, 5, 511, 512, 3000, 20_000] {
+            let mut s: Vec<Swept> = (0..n as u32)
+                .map(|slot| {
+                    let v = next();
+                    let lo = match v % 16 {
+                        0 => 0.0,
+                        1 => -0.0,
+                        2 => f64::INFINITY,
+                        3 => f64::NEG_INFINITY,
+                        4 => f64::NAN,
+                        5 => -f64::NAN,
+                        6 => 1.5,
+                        _ => {
+                            ((v >> 8) as f64 / (1u64 << 40) as f64 - 4000.0)
+                                * [1.0, 1e-300, 1e300][v as usize % 3]
+                        }
+                    };
+                    Swept {
+                        lo,
+                        hi: lo,
+                        rest: [0.0; 4],
+                        slot,
+                    }
+                })
+                .collect();
+            let mut want = s.clone();
+            want.sort_unstable_by(Swept::cmp);
+            sort_swept(&mut s, &mut r);
+            let bits = |v: &[Swept]| {
+                v.iter()
+                    .map(|b| (b.lo.to_bits(), b.slot))
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(bits(&s), bits(&want), "{n} boxes");
+        }
     }
 
     fn unit_at(x: f64, y: f64) -> Aabb {
