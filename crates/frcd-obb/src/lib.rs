@@ -35,6 +35,7 @@ mod isa;
 mod nodes;
 pub mod oracle;
 mod query;
+mod radix;
 mod sat;
 #[cfg(feature = "serde")]
 mod saved;

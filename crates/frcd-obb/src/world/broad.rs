@@ -519,9 +519,8 @@ struct RadixScratch {
 const RADIX_MIN: usize = 512;
 
 /// `s` in the order of [`Swept::cmp`], for boxes given in increasing slot order (as every
-/// caller gives them): a stable radix sort of the lower bounds' total-order keys, eleven bits
-/// a pass (passes where every key has the same digit are skipped), then one permutation of
-/// the boxes. Stable, so equal lower bounds stay in slot order, as `Swept::cmp` puts them.
+/// caller gives them): a stable radix sort of the lower bounds' total-order keys
+/// (`radix.rs`, eleven bits a pass), then one permutation of the boxes. Stable, so equal lower bounds stay in slot order, as `Swept::cmp` puts them.
 /// (The comparison sort of the 56-byte boxes was about 15 % of a rebuild of 4,096 boxes.)
 fn sort_swept(s: &mut Vec<Swept>, r: &mut RadixScratch) {
     let n = s.len();
@@ -536,33 +535,10 @@ fn sort_swept(s: &mut Vec<Swept>, r: &mut RadixScratch) {
         let b = x.to_bits();
         if b >> 63 == 1 { !b } else { b | 1 << 63 }
     };
-    let (keys, other) = (&mut r.keys, &mut r.other);
+    let keys = &mut r.keys;
     keys.clear();
     keys.extend(s.iter().enumerate().map(|(i, b)| (key(b.lo), i as u32)));
-    other.clear();
-    other.resize(n, (0, 0));
-    let mut count = [0u32; 2048];
-    for shift in (0..64).step_by(11) {
-        count.fill(0);
-        for &(k, _) in keys.iter() {
-            count[(k >> shift) as usize & 2047] += 1;
-        }
-        if count.iter().any(|&c| c as usize == n) {
-            continue;
-        }
-        let mut at = 0u32;
-        for c in count.iter_mut() {
-            let here = *c;
-            *c = at;
-            at += here;
-        }
-        for &e in keys.iter() {
-            let d = (e.0 >> shift) as usize & 2047;
-            other[count[d] as usize] = e;
-            count[d] += 1;
-        }
-        std::mem::swap(keys, other);
-    }
+    crate::radix::sort_by_u64_key(keys, &mut r.other, &mut [0; 2048], |e| e.0);
     r.swept.clear();
     r.swept.extend(keys.iter().map(|&(_, i)| s[i as usize]));
     std::mem::swap(s, &mut r.swept);
