@@ -40,6 +40,8 @@ mod sat;
 #[cfg(feature = "serde")]
 mod saved;
 mod solid;
+#[cfg(test)]
+mod test_rng;
 mod tree;
 mod wide;
 mod world;

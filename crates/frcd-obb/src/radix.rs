@@ -62,13 +62,7 @@ mod tests {
     /// pass, on keys that differ in few bits, in every bit, or not at all.
     #[test]
     fn equals_a_stable_comparison_sort() {
-        let mut x = 0x5EEDu64;
-        let mut next = move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x
-        };
+        let mut next = crate::test_rng::xorshift(0x5EED);
         let lists: Vec<Vec<(u64, u32)>> = vec![
             vec![],
             vec![(7, 0)],

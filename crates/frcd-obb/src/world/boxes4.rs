@@ -245,13 +245,8 @@ mod tests {
     /// overflow to infinity and NaN.
     #[test]
     fn four_lanes_equal_one_body_at_a_time() {
-        let mut s = 0x9E37_79B9_7F4A_7C15u64;
-        let mut rnd = move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        let mut bits = crate::test_rng::xorshift(0x9E37_79B9_7F4A_7C15);
+        let mut rnd = move || (bits() >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0;
         let same = |a: f64, b: f64| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
         let (mut checked, mut nan, mut inf) = (0, 0, 0);
         for round in 0..4000 {

@@ -848,13 +848,7 @@ mod tests {
     /// to many thousand boxes with ties, signed zeros, infinities and NaN lower bounds.
     #[test]
     fn radix_sort_of_swept_boxes_equals_the_sort() {
-        let mut x = 99u64;
-        let mut next = move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x
-        };
+        let mut next = crate::test_rng::xorshift(99);
         let mut r = RadixScratch::default();
         for n in [0, 5, 511, 512, 3000, 20_000] {
             let mut s: Vec<Swept> = (0..n as u32)
