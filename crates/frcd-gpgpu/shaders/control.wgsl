@@ -1,11 +1,10 @@
 // frcd-gpgpu: single-invocation control passes of the breadth-first traversal.
 //
 // `init` starts a batch: the CPU wrote the root pair of every body pair into frontier 0.
-// `prepare` runs after each traversal level: it turns the next frontier's size into the
-// indirect dispatch arguments of the following level, records overflow (a frontier larger than
-// its buffer), and resets the append counter. `prepare_tris` runs after the last level: the
-// arguments of the `triangles` pass (one invocation per listed triangle pair). All run inside
-// the query's one submission.
+// `prepare_tris` runs after the last level: the arguments of the `triangles` pass (one
+// invocation per listed triangle pair). Between levels no control pass runs: each level
+// writes the next level's indirect arguments itself (`traverse`, traverse.wgsl). All run
+// inside the query's one submission.
 
 const WG: u32 = 64u;
 
@@ -28,40 +27,20 @@ fn set_args(m: u32) {
     args[2] = 1u;
 }
 
-// The CPU wrote the batch's root pairs (k, 0, 0) into frontier 0 (at most its capacity).
+// The CPU wrote the batch's root pairs (k, 0, 0) into frontier 0 (at most its capacity), and
+// (1, 1, 1) into the indirect arguments of levels 1 and 2 (`traverse` raises them).
 @compute @workgroup_size(1)
 fn init() {
     let n = params.caps.w;
     let m = min(n, params.caps.x);
-    state.cur = m;
-    atomicStore(&state.next, 0u);
+    atomicStore(&state.counts[0], m);
+    atomicStore(&state.counts[1], 0u);
+    atomicStore(&state.counts[2], 0u);
     atomicStore(&state.out, 0u);
     atomicStore(&state.tris, 0u);
-    state.needed = n;
+    atomicStore(&state.needed, n);
     state.levels = 0u;
     state.pairs_tested = 0u;
-    set_args(m);
-}
-
-@compute @workgroup_size(1)
-fn prepare() {
-    // The level just run tested `cur` entries.
-    if state.cur > 0u {
-        state.levels += 1u;
-        state.pairs_tested += state.cur;
-    }
-    let n = atomicLoad(&state.next);
-    atomicStore(&state.next, 0u);
-    // The triangle list's counter stops at 2^31 (beyond every capacity: the CPU re-runs or
-    // refuses); one level adds less than 2^31 (checked on the CPU), so it never wraps.
-    if atomicLoad(&state.tris) >= 0x80000000u {
-        atomicStore(&state.tris, 0x80000000u);
-    }
-    state.needed = max(state.needed, n);
-    // On overflow only the first `cap` entries were written; run those (the answer is discarded
-    // and the batch re-run with a larger frontier, but `needed` keeps growing meanwhile).
-    let m = min(n, params.caps.x);
-    state.cur = m;
     set_args(m);
 }
 

@@ -75,6 +75,13 @@ override EXACT_PATH: bool = true;
 @group(1) @binding(3) var<storage, read_write> tri_list: array<vec4<u32>>;
 @group(1) @binding(4) var<uniform> params: Params;
 @group(1) @binding(5) var<storage, read> pairs: array<PairInfo>;
+// `traverse` only (the triangle pass binds other buffers there and does not use them): the
+// next level's indirect arguments (x, y, z, unused), which this level raises to cover what it
+// appends; the arguments of the level after it, which it sets back to (1, 1, 1); and which of
+// `State.counts` it reads, appends to and zeroes.
+@group(1) @binding(6) var<storage, read_write> args_next: array<atomic<u32>, 4>;
+@group(1) @binding(7) var<storage, read_write> args_after: array<u32, 4>;
+@group(1) @binding(8) var<uniform> level: Level;
 
 // The pair this invocation works on.
 var<private> pose: PairInfo;
@@ -520,6 +527,12 @@ fn tri_pair(pi: u32, a0: vec4<f32>, a1: vec4<f32>, a2: vec4<f32>,
 fn leaf_pair(p: u32, na: Node, nb: Node) {
     let k = na.count * nb.count;
     let base = atomicAdd(&state.tris, k);
+    // The counter stops near 2^31 (beyond every capacity: the CPU re-runs or refuses): every
+    // append that takes it past 2^31 brings it back there, and one level appends less than 2^31
+    // in all (checked on the CPU), so it never wraps.
+    if base + k > 0x80000000u {
+        atomicMin(&state.tris, 0x80000000u);
+    }
     if base + k <= params.caps2.x {
         var w = base;
         for (var i = 0u; i < na.count; i++) {
@@ -536,6 +549,26 @@ fn leaf_pair(p: u32, na: Node, nb: Node) {
 // wgpu's indirect-call validation is off (frcd-gpgpu's own instances turn it off).
 fn grid_x(m: u32) -> u32 {
     return min((m + WG - 1u) / WG, params.caps.z);
+}
+
+// The next level's indirect arguments, raised to cover entries [base, base + k) of its
+// frontier (at most the capacity): ceil(m / WG) workgroups as `control.wgsl`'s `set_args` lays
+// them out, x = min(groups, caps.z) and y = ceil(groups / caps.z), both non-decreasing in m, so
+// the largest raise is the arguments of the final size. Only the append that opens a new
+// workgroup raises them (one append in WG / k), so the atomics stay few. An append past the
+// capacity also records the size asked for (`needed`).
+fn append_args(base: u32, k: u32) {
+    let cap = params.caps.x;
+    let end = base + k;
+    if end > cap {
+        atomicMax(&state.needed, end);
+    }
+    let before = (min(base, cap) + WG - 1u) / WG;
+    let groups = (min(end, cap) + WG - 1u) / WG;
+    if groups > before {
+        atomicMax(&args_next[0], min(groups, params.caps.z));
+        atomicMax(&args_next[1], (groups + params.caps.z - 1u) / params.caps.z);
+    }
 }
 
 // One listed triangle pair per invocation: the triangle test, and the pair appended to the
@@ -581,8 +614,24 @@ fn triangles(@builtin(workgroup_id) wid: vec3<u32>,
 @compute @workgroup_size(64)
 fn traverse(@builtin(workgroup_id) wid: vec3<u32>,
             @builtin(local_invocation_index) lid: u32) {
-    let idx = (wid.y * grid_x(state.cur) + wid.x) * WG + lid;
-    if idx >= state.cur {
+    // On overflow only the first `caps.x` entries were written: those run (the answer is
+    // discarded and the batch re-run with a larger frontier).
+    let cur = min(atomicLoad(&state.counts[level.slots.x]), params.caps.x);
+    // Every level runs at least one workgroup (its arguments never fall below (1, 1, 1)), whose
+    // first invocation does the level's bookkeeping: the counter and the arguments of the level
+    // after next, which nobody reads during this level, back to their start.
+    if wid.x == 0u && wid.y == 0u && lid == 0u {
+        atomicStore(&state.counts[level.slots.z], 0u);
+        args_after[0] = 1u;
+        args_after[1] = 1u;
+        args_after[2] = 1u;
+        if cur > 0u {
+            state.levels += 1u;
+            state.pairs_tested += cur;
+        }
+    }
+    let idx = (wid.y * grid_x(cur) + wid.x) * WG + lid;
+    if idx >= cur {
         return;
     }
     let entry = frontier_in[idx];
@@ -620,8 +669,9 @@ fn traverse(@builtin(workgroup_id) wid: vec3<u32>,
         ncb = 2u;
     }
     let k = nca * ncb;
-    let base = atomicAdd(&state.next, k);
-    // Past capacity nothing is written; the control pass sees next > capacity and flags overflow.
+    let base = atomicAdd(&state.counts[level.slots.y], k);
+    append_args(base, k);
+    // Past capacity nothing is written; the CPU sees `needed` above the capacity and re-runs.
     if base + k <= params.caps.x {
         var w = base;
         for (var i = 0u; i < nca; i++) {

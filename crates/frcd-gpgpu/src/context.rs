@@ -19,12 +19,12 @@ pub(crate) const BOX_TILE: u32 = 64;
 pub fn requirements() -> wgpu::Limits {
     wgpu::Limits {
         // traverse.wgsl: frontier in/out (triangle list and output in the triangle pass),
-        // state, triangle list, pair table.
-        max_storage_buffers_per_shader_stage: 5,
+        // state, triangle list, pair table, the next two levels' indirect arguments.
+        max_storage_buffers_per_shader_stage: 7,
         // The arena: nodes, triangles.
         max_sampled_textures_per_shader_stage: 2,
-        // The arena layout, the capacities.
-        max_uniform_buffers_per_shader_stage: 2,
+        // The arena layout, the capacities, the traversal level.
+        max_uniform_buffers_per_shader_stage: 3,
         max_bind_groups: 2,
         max_storage_buffer_binding_size: 1 << 16,
         max_compute_invocations_per_workgroup: WG,
@@ -116,7 +116,6 @@ pub(crate) struct Pipelines {
     /// The triangle pass with the rotated path only (`EXACT_PATH = false`).
     pub triangles_rotated: wgpu::ComputePipeline,
     pub init: wgpu::ComputePipeline,
-    pub prepare: wgpu::ComputePipeline,
     /// control.wgsl's arguments of the triangle pass.
     pub prepare_tris: wgpu::ComputePipeline,
     pub boxes: wgpu::ComputePipeline,
@@ -579,6 +578,9 @@ impl Pipelines {
                 storage(3, false),
                 uniform(4),
                 storage(5, true),
+                storage(6, false),
+                storage(7, false),
+                uniform(8),
             ],
         );
         let ctrl_bgl = bgl(
@@ -681,7 +683,6 @@ impl Pipelines {
                 &[("EXACT_PATH", 0.0)],
             ),
             init: pipeline("frcd-gpgpu init", &ctrl_layout, &control_mod, "init"),
-            prepare: pipeline("frcd-gpgpu prepare", &ctrl_layout, &control_mod, "prepare"),
             prepare_tris: pipeline(
                 "frcd-gpgpu prepare_tris",
                 &ctrl_layout,

@@ -1,6 +1,6 @@
 use crate::{GpuContext, GpuError, GpuMesh};
 use frcd_geom::{DVec3, Pose, TriMesh, Triangle};
-use frcd_gpu::layout::{PairInfo, Params, State};
+use frcd_gpu::layout::{Level, PairInfo, Params, State};
 use frcd_obb::RelativeFrame;
 use frcd_tritri::Method;
 use std::sync::Arc;
@@ -9,6 +9,8 @@ use std::sync::Arc;
 const UNCERTAIN_FLAG: u32 = 0x8000_0000;
 /// Bytes of the `State` struct shared with the shaders (prelude).
 const STATE_BYTES: u64 = std::mem::size_of::<State>() as u64;
+/// Bytes of the `Level` uniform (prelude).
+const LEVEL_BYTES: u64 = std::mem::size_of::<Level>() as u64;
 /// Bytes of one frontier or output entry (`vec4<u32>`).
 const ENTRY_BYTES: u64 = 16;
 /// Bytes of the `Params` uniform (prelude).
@@ -158,7 +160,10 @@ struct Buffers {
     pair_cap: u32,
     frontier: [wgpu::Buffer; 2],
     state: wgpu::Buffer,
-    args: wgpu::Buffer,
+    /// Indirect arguments of the traversal levels, by level mod 3 (level L dispatches with
+    /// `args[L % 3]`, raises `args[(L + 1) % 3]` and resets `args[(L + 2) % 3]`); `args[0]`
+    /// also holds the triangle pass's.
+    args: [wgpu::Buffer; 3],
     out: wgpu::Buffer,
     params: wgpu::Buffer,
     pairs: wgpu::Buffer,
@@ -167,7 +172,9 @@ struct Buffers {
     timers: Option<(wgpu::QuerySet, wgpu::Buffer)>,
     /// Byte offset of the output in the staging buffer (after the state and the timestamps).
     out_offset: u64,
-    trav_bg: [wgpu::BindGroup; 2],
+    /// Level L's bind group is `trav_bg[L % 6]` (frontiers by L mod 2, arguments and
+    /// counters by L mod 3).
+    trav_bg: [wgpu::BindGroup; 6],
     /// The triangle pass: triangle list in, output out.
     tri_bg: wgpu::BindGroup,
     ctrl_bg: wgpu::BindGroup,
@@ -262,7 +269,22 @@ impl QueryScratch {
             buf("frcd-gpgpu frontier 1", fsize, B::STORAGE),
         ];
         let state = buf("frcd-gpgpu state", STATE_BYTES, B::STORAGE | B::COPY_SRC);
-        let args = buf("frcd-gpgpu indirect args", 16, B::STORAGE | B::INDIRECT);
+        let args = [0, 1, 2].map(|k| {
+            buf(
+                &format!("frcd-gpgpu indirect args {k}"),
+                16,
+                B::STORAGE | B::INDIRECT | B::COPY_DST,
+            )
+        });
+        // Which counters and arguments a level uses, one uniform per level mod 3.
+        let level = [0u32, 1, 2].map(|k| {
+            let b = buf("frcd-gpgpu level", LEVEL_BYTES, B::UNIFORM | B::COPY_DST);
+            let slots = Level {
+                slots: [k, (k + 1) % 3, (k + 2) % 3, 0],
+            };
+            ctx.queue.write_buffer(&b, 0, bytemuck::bytes_of(&slots));
+            b
+        });
         let out = buf("frcd-gpgpu output", osize, B::STORAGE | B::COPY_SRC);
         let tris = buf("frcd-gpgpu triangle list", tsize, B::STORAGE);
         let params = buf("frcd-gpgpu params", PARAMS_BYTES, B::UNIFORM | B::COPY_DST);
@@ -286,7 +308,7 @@ impl QueryScratch {
             out_offset + osize,
             B::MAP_READ | B::COPY_DST,
         );
-        let trav = |input: &wgpu::Buffer, output: &wgpu::Buffer, list: &wgpu::Buffer| {
+        let trav = |input: &wgpu::Buffer, output: &wgpu::Buffer, list: &wgpu::Buffer, k: usize| {
             d.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("frcd-gpgpu traversal"),
                 layout: &ctx.pipes.trav_bgl,
@@ -297,22 +319,25 @@ impl QueryScratch {
                     crate::context::entry(3, list),
                     crate::context::entry(4, &params),
                     crate::context::entry(5, &pairs),
+                    crate::context::entry(6, &args[(k + 1) % 3]),
+                    crate::context::entry(7, &args[(k + 2) % 3]),
+                    crate::context::entry(8, &level[k]),
                 ],
             })
         };
-        let trav_bg = [
-            trav(&frontier[0], &frontier[1], &tris),
-            trav(&frontier[1], &frontier[0], &tris),
-        ];
-        // The triangle pass reads the list and writes the output; its binding 3 is unused
-        // (a frontier buffer is bound there to fill the layout).
-        let tri_bg = trav(&tris, &out, &frontier[0]);
+        let trav_bg = [0, 1, 2, 3, 4, 5].map(|l| {
+            let (input, output) = (&frontier[l % 2], &frontier[(l + 1) % 2]);
+            trav(input, output, &tris, l % 3)
+        });
+        // The triangle pass reads the list and writes the output, dispatched with `args[0]`;
+        // its bindings 3 and 6-8 are unused (buffers other than `args[0]` fill the layout).
+        let tri_bg = trav(&tris, &out, &frontier[0], 0);
         let ctrl_bg = d.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("frcd-gpgpu control"),
             layout: &ctx.pipes.ctrl_bgl,
             entries: &[
                 crate::context::entry(0, &state),
-                crate::context::entry(1, &args),
+                crate::context::entry(1, &args[0]),
                 crate::context::entry(2, &params),
             ],
         });
@@ -828,9 +853,10 @@ impl GpuContext {
         let n = p.frames.len() as u32;
         scratch.ensure(self, n)?;
         let bufs = scratch.bufs.as_ref().expect("ensured");
-        // One level lists at most frontier × leaf pair triangle pairs; `prepare` clamps the
-        // triangle counter at 2^31 after every level, so below 2^31 per level it never wraps
-        // (a wrapped counter would look like a short list: pairs lost).
+        // One level lists at most frontier × leaf pair triangle pairs; every append that
+        // takes the triangle counter past 2^31 brings it back there (`leaf_pair`), so below
+        // 2^31 per level it never wraps (a wrapped counter would look like a short list:
+        // pairs lost).
         let per_level = bufs.frontier_cap as u64 * p.leaf_pairs;
         if per_level >= 1 << 31 {
             return Err(GpuError::CapacityExceeded {
@@ -859,6 +885,12 @@ impl GpuContext {
             self.queue
                 .write_buffer(&bufs.frontier[0], 0, bytemuck::cast_slice(&roots));
         }
+        // Levels 1 and 2 start from one workgroup (`init` writes level 0's arguments; each
+        // level resets those of the level after next).
+        for args in &bufs.args[1..] {
+            self.queue
+                .write_buffer(args, 0, bytemuck::cast_slice(&[1u32, 1, 1, 0]));
+        }
         let arena_bg = self
             .arena
             .lock()
@@ -881,15 +913,13 @@ impl GpuContext {
             pass.set_bind_group(0, &bufs.ctrl_bg, &[]);
             pass.dispatch_workgroups(1, 1, 1);
             stamp(&mut pass, 1);
-            // Level k reads frontier k % 2.
+            // Level L reads frontier L % 2 and dispatches with the arguments the level before
+            // it wrote (`init` for level 0): one dispatch per level, no control pass between.
+            pass.set_pipeline(&self.pipes.traverse);
+            pass.set_bind_group(0, &arena_bg, &[]);
             for level in 0..p.levels as usize {
-                pass.set_pipeline(&self.pipes.traverse);
-                pass.set_bind_group(0, &arena_bg, &[]);
-                pass.set_bind_group(1, &bufs.trav_bg[level % 2], &[]);
-                pass.dispatch_workgroups_indirect(&bufs.args, 0);
-                pass.set_pipeline(&self.pipes.prepare);
-                pass.set_bind_group(0, &bufs.ctrl_bg, &[]);
-                pass.dispatch_workgroups(1, 1, 1);
+                pass.set_bind_group(1, &bufs.trav_bg[level % 6], &[]);
+                pass.dispatch_workgroups_indirect(&bufs.args[level % 3], 0);
                 stamp(&mut pass, level as u32 + 2);
             }
             // Every listed triangle pair, one per invocation.
@@ -903,7 +933,7 @@ impl GpuContext {
             });
             pass.set_bind_group(0, &arena_bg, &[]);
             pass.set_bind_group(1, &bufs.tri_bg, &[]);
-            pass.dispatch_workgroups_indirect(&bufs.args, 0);
+            pass.dispatch_workgroups_indirect(&bufs.args[0], 0);
             stamp(&mut pass, p.levels + 2);
         }
         enc.copy_buffer_to_buffer(&bufs.state, 0, &bufs.staging, 0, STATE_BYTES);
@@ -967,7 +997,9 @@ impl GpuContext {
                 })?;
             answer.timings.wait += waited.elapsed();
             answer.readbacks += 1;
-            let (cur, out_count, needed) = (state.cur, state.out, state.needed);
+            // What the last level appended (nothing when the traversal finished).
+            let cur = state.counts[p.levels as usize % 3];
+            let (out_count, needed) = (state.out, state.needed);
             let mut rerun = false;
             let most = dispatchable(self);
             for (what, count) in [

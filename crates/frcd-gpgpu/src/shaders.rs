@@ -2,7 +2,7 @@
 
 /// One level of the pair-tree traversal: OBB separating-axis test and triangle test.
 pub const TRAVERSE: &str = include_str!("../shaders/traverse.wgsl");
-/// Single-invocation control passes: query start and per-level indirect arguments.
+/// Single-invocation control passes: query start and the triangle pass's indirect arguments.
 pub const CONTROL: &str = include_str!("../shaders/control.wgsl");
 /// All-pairs box overlap of many bodies.
 pub const BOXES: &str = include_str!("../shaders/boxes.wgsl");

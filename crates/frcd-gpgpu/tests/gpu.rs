@@ -283,6 +283,78 @@ fn one_submission_and_one_readback_per_query() {
     }
 }
 
+/// Checks that a batch's level counters add up: each body pair's breadth-first descent is its
+/// own, so the batch tests the node pairs of its pairs run one by one (their sum) over as many
+/// levels as the deepest; and a scratch whose buffers hold a larger batch's frontiers and
+/// counters gives the same batch the same counts and pairs as a fresh one. The levels count
+/// and zero their own frontier sizes and dispatch arguments (no control pass between them), so
+/// a size left from an earlier level or batch would show here as node pairs tested twice.
+fn level_counts_add_up(ctx: &GpuContext, a: &Body, poses: &[(Pose, Pose)]) {
+    fn batch<'p>(a: &'p Body, poses: &'p [(Pose, Pose)]) -> Vec<frcd_gpgpu::BodyPair<'p>> {
+        poses
+            .iter()
+            .map(|(pa, pb)| (&a.gpu, pa, &a.gpu, pb))
+            .collect()
+    }
+    let small = &poses[..poses.len() / 2];
+    let fresh = ctx
+        .collide_batch(&batch(a, small), &mut QueryScratch::default())
+        .expect("fresh scratch");
+    let (mut tested, mut levels) = (0, 0);
+    for (k, (pa, pb)) in small.iter().enumerate() {
+        let one = ctx
+            .collide(&a.gpu, pa, &a.gpu, pb, &mut QueryScratch::default())
+            .expect("one pair");
+        assert_eq!(
+            one.pairs,
+            oracle::pairs(&a.mesh, pa, &a.mesh, pb),
+            "pair {k}"
+        );
+        assert_eq!(one.pairs, fresh.results[k].pairs, "pair {k}");
+        tested += one.node_pairs_tested;
+        levels = levels.max(one.levels);
+    }
+    assert!(
+        levels >= 3,
+        "{levels} levels: too shallow to test the rotation"
+    );
+    assert_eq!(fresh.node_pairs_tested, tested);
+    assert_eq!(fresh.levels, levels);
+    let mut used = QueryScratch::default();
+    for round in 0..2 {
+        let big = ctx.collide_batch(&batch(a, poses), &mut used).expect("big");
+        assert!(big.node_pairs_tested > fresh.node_pairs_tested);
+        let again = ctx
+            .collide_batch(&batch(a, small), &mut used)
+            .expect("again");
+        assert_eq!(
+            (again.node_pairs_tested, again.levels),
+            (fresh.node_pairs_tested, fresh.levels),
+            "round {round}"
+        );
+        for (k, (x, y)) in again.results.iter().zip(&fresh.results).enumerate() {
+            assert_eq!(x.pairs, y.pairs, "round {round}, pair {k}");
+        }
+    }
+}
+
+#[test]
+fn level_counters_add_up_and_reused_scratch_changes_nothing() {
+    let Some(ctx) = shared() else { return };
+    let a = body(ctx, shapes::icosphere(1.0, 3));
+    let poses: Vec<(Pose, Pose)> = (0..6)
+        .map(|k| {
+            let s = k as f64 / 6.0;
+            let dir = DVec3::new((6.0 * s).cos(), (6.0 * s).sin(), 0.3 - s).normalize();
+            (
+                Pose::IDENTITY,
+                Pose::new((0.6 + 0.2 * s) * dir, DQuat::from_rotation_z(s)),
+            )
+        })
+        .collect();
+    level_counts_add_up(ctx, &a, &poses);
+}
+
 #[test]
 fn overflow_is_detected_and_the_query_rerun() {
     let Some(ctx) = new_context() else { return };
@@ -954,6 +1026,15 @@ fn two_dimensional_grids_without_indirect_validation() {
     }
     // More than one row of 8 workgroups of 64 in the triangle pass at least.
     assert!(reported > 8 * 64, "{reported} reported pairs");
+    // Levels of more than one row too (their arguments raised on both dimensions), and
+    // counts that add up there.
+    assert!(
+        got.node_pairs_tested > 2 * 8 * 64 * got.levels as u64,
+        "{} node pairs in {} levels",
+        got.node_pairs_tested,
+        got.levels
+    );
+    level_counts_add_up(&ctx, &a, &poses);
     // A batch whose levels need more than one dispatch can cover: a typed error, not a
     // dispatch beyond the device's limits (nothing validates the arguments on this instance).
     let big = body(&ctx, shapes::icosphere(1.0, 5));

@@ -4,22 +4,31 @@
 
 // ---- frcd-gpgpu: pair traversal (traverse.wgsl, control.wgsl) ----
 
-// Counters of one batch's traversal.
+// Counters of one batch's traversal. The traversal runs one dispatch per level and no control
+// pass between levels, so each level's frontier size has its own counter, by level mod 3: level
+// L reads counts[L % 3], appends to counts[(L + 1) % 3] and zeroes counts[(L + 2) % 3] (the
+// size its predecessor read), see `Level`.
 struct State {
-    // Entries in the current frontier (set by the control pass).
-    cur: u32,
-    // Entries appended to the next frontier (may exceed the capacity: overflow).
-    next: atomic<u32>,
+    // Entries appended to each level's frontier, by level mod 3 (may exceed the capacity:
+    // overflow).
+    counts: array<atomic<u32>, 3>,
     // Triangle pairs appended to the output (may exceed the capacity: overflow).
     out: atomic<u32>,
-    // Largest frontier size requested so far (control pass).
-    needed: u32,
-    // Levels that had work, and node pairs tested in total (control pass).
+    // The batch's root pairs, or the largest frontier size requested if that exceeds the
+    // frontier's capacity (overflow: the CPU re-runs with a frontier this large).
+    needed: atomic<u32>,
+    // Levels that had work, and node pairs tested in total.
     levels: u32,
     pairs_tested: u32,
     // Triangle pairs appended to the triangle list (may exceed the capacity: overflow).
     tris: atomic<u32>,
-    pad0: u32,
+}
+
+// Which of `State.counts` (and of the three indirect-argument buffers) one traversal level
+// uses: (L % 3: its frontier's size, (L + 1) % 3: the next frontier's, (L + 2) % 3: the one it
+// zeroes, unused). One uniform buffer per value of L % 3.
+struct Level {
+    slots: vec4<u32>,
 }
 
 struct Params {

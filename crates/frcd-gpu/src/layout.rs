@@ -9,13 +9,13 @@ use bytemuck::{Pod, Zeroable};
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
 pub struct State {
-    /// Entries in the current frontier (0 when the traversal finished).
-    pub cur: u32,
-    /// Entries appended to the next frontier.
-    pub next: u32,
+    /// Entries appended to each level's frontier, by level mod 3 (after the batch, the entry
+    /// of `levels % 3` holds what the last level left: 0 when the traversal finished).
+    pub counts: [u32; 3],
     /// Triangle pairs appended to the output (may exceed its capacity: overflow).
     pub out: u32,
-    /// Largest frontier size requested (may exceed its capacity: overflow).
+    /// The batch's root pairs, or the largest frontier size requested where that exceeded
+    /// the frontier's capacity (overflow).
     pub needed: u32,
     /// Levels that had work.
     pub levels: u32,
@@ -23,8 +23,15 @@ pub struct State {
     pub pairs_tested: u32,
     /// Triangle pairs appended to the triangle list (may exceed its capacity: overflow).
     pub tris: u32,
-    /// Padding.
-    pub pad0: u32,
+}
+
+/// `Level`: which counters and indirect-argument buffers one traversal level uses
+/// (`L % 3`, `(L + 1) % 3`, `(L + 2) % 3`, unused).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct Level {
+    /// `[L % 3, (L + 1) % 3, (L + 2) % 3, 0]`.
+    pub slots: [u32; 4],
 }
 
 /// `Params`: capacities of one frcd-gpgpu batch.
@@ -160,15 +167,14 @@ pub fn mirrors() -> Vec<MirrorLayout> {
     }
     vec![
         m!(State {
-            cur: u32,
-            next: u32,
+            counts: [u32; 3],
             out: u32,
             needed: u32,
             levels: u32,
             pairs_tested: u32,
-            tris: u32,
-            pad0: u32
+            tris: u32
         }),
+        m!(Level { slots: [u32; 4] }),
         m!(Params {
             caps: [u32; 4],
             caps2: [u32; 4]
