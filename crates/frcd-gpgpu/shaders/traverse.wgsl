@@ -617,9 +617,10 @@ fn traverse(@builtin(workgroup_id) wid: vec3<u32>,
     // On overflow only the first `caps.x` entries were written: those run (the answer is
     // discarded and the batch re-run with a larger frontier).
     let cur = min(atomicLoad(&state.counts[level.slots.x]), params.caps.x);
-    // Every level runs at least one workgroup (its arguments never fall below (1, 1, 1)), whose
-    // first invocation does the level's bookkeeping: the counter and the arguments of the level
-    // after next, which nobody reads during this level, back to their start.
+    // Every level after the first runs at least one workgroup (its arguments start at (1, 1, 1);
+    // an empty first level runs none, and its level after next starts from `init`'s values),
+    // whose first invocation does the level's bookkeeping: the counter and the arguments of the
+    // level after the next one, which nobody reads during this level, back to their start.
     if wid.x == 0u && wid.y == 0u && lid == 0u {
         atomicStore(&state.counts[level.slots.z], 0u);
         args_after[0] = 1u;
