@@ -268,9 +268,9 @@ pub fn containment(a: &ObbTree, pose_a: &Pose, b: &ObbTree, pose_b: &Pose) -> Op
 
 /// Sorts triangle pairs ascending (by A's triangle, then B's), on one `u64` key per pair.
 /// Long lists (a dense overlap's hundreds of pairs) take a least-significant-digit radix sort
-/// over the key bytes that differ between pairs (`radix.rs`, passes of 256 buckets): on the dense sweep's all
-/// pairs (about 590 pairs) it saved 36 thousand of the query's 2.6 million instructions
-/// against the comparison sort, which short lists keep.
+/// over the key bytes that differ between pairs (`radix.rs`, passes of 256 buckets): on the
+/// dense sweep's all pairs (about 590 pairs) it saved 36 thousand of the query's 2.6 million
+/// instructions against the comparison sort, which short lists keep.
 fn sort_pairs(pairs: &mut [(u32, u32)]) {
     let key = |&(a, b): &(u32, u32)| (u64::from(a) << 32) | u64::from(b);
     if pairs.len() < RADIX_MIN_PAIRS {

@@ -528,15 +528,12 @@ impl World {
     #[inline(always)]
     fn move_body(&mut self, id: BodyId, pose: Pose) {
         let i = id.index() as usize;
-        let p = &mut self.placements[i];
-        if p.pose != pose {
-            p.pose = pose;
-            p.version += 1;
-            // The box from the local values, not read back from memory: written piecewise, a
+        if self.placements[i].pose != pose {
+            // The box passed on as a value, not read back from memory: written piecewise, a
             // 16-byte read spanning two of those writes waits for them to reach the cache
             // (a quarter of this function's time, perf).
             let aabb = world_box(&self.local_boxes[i], &pose);
-            self.broad.set(id.index(), aabb);
+            self.place_body(id, pose, aabb);
         }
     }
 

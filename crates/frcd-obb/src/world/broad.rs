@@ -520,8 +520,9 @@ const RADIX_MIN: usize = 512;
 
 /// `s` in the order of [`Swept::cmp`], for boxes given in increasing slot order (as every
 /// caller gives them): a stable radix sort of the lower bounds' total-order keys
-/// (`radix.rs`, eleven bits a pass), then one permutation of the boxes. Stable, so equal lower bounds stay in slot order, as `Swept::cmp` puts them.
-/// (The comparison sort of the 56-byte boxes was about 15 % of a rebuild of 4,096 boxes.)
+/// (`radix.rs`, eleven bits a pass), then one permutation of the boxes. Stable, so equal
+/// lower bounds stay in slot order, as `Swept::cmp` puts them. (The comparison sort of the
+/// 56-byte boxes was about 15 % of a rebuild of 4,096 boxes.)
 fn sort_swept(s: &mut Vec<Swept>, r: &mut RadixScratch) {
     let n = s.len();
     debug_assert!(s.windows(2).all(|w| w[0].slot < w[1].slot));
