@@ -38,6 +38,12 @@
 //!
 //! The crossover (the smallest size where the GPU is faster) is printed for each comparison.
 //! Options: `--levels 1,2,3,4,5`, `--pairs K`, `--bodies 100,400,...`, `--runs N`, `--out DIR`.
+//!
+//! GPU clocks: a hardware GPU's driver picks its clock from how busy it has been. An H200
+//! idles at 345 MHz (boost 1,980) and stays there through a few milliseconds of work after a
+//! few seconds of CPU-side setup, so every GPU timing first repeats its work for
+//! `--gpu-warmup-ms` (500 on hardware, 0 on a software driver), and on NVIDIA adapters the
+//! breakdown table records the SM clock after each row (`nvidia-smi`).
 
 use anyhow::{Context, Result, bail};
 use frcd_geom::{Aabb, DQuat, DVec3, Pose, shapes};
@@ -46,7 +52,7 @@ use frcd_obb::{BuildOptions, Mode, ObbTree, Request, collide};
 use rayon::prelude::*;
 use std::fmt::Write as _;
 use std::path::PathBuf;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Options of `cargo xtask bench gpgpu`.
 #[derive(clap::Args, Debug)]
@@ -101,6 +107,12 @@ pub struct Opts {
     /// software ones, or `FRCD_GPGPU_EXACT_OFFSETS`).
     #[arg(long, value_name = "on|off", value_parser = parse_on_off)]
     pub exact_offsets: Option<bool>,
+    /// Before each GPU timing, repeat the timed work for this many milliseconds, so that a
+    /// hardware GPU has left its idle clock (an H200 idles at 345 MHz against 1,980 under load,
+    /// and a few milliseconds of work every few seconds never raise it). Left out: 500 on a
+    /// hardware adapter, 0 on a software one; 0 measures a cold GPU.
+    #[arg(long = "gpu-warmup-ms", value_name = "MS")]
+    pub gpu_warmup_ms: Option<u64>,
 }
 
 /// `on` / `off` as a bool (clap value parser).
@@ -126,6 +138,8 @@ struct Breakdown {
     gpu_ms: Option<[f64; 3]>,
     /// Each traversal level's GPU time (pass timers only; else empty).
     levels_ms: Vec<f64>,
+    /// The GPU's SM clock right after the timed runs (NVIDIA only, see [`gpu_clock_mhz`]).
+    clock_mhz: Option<u32>,
 }
 
 impl Breakdown {
@@ -134,6 +148,7 @@ impl Breakdown {
         batch_ms: f64,
         got: &frcd_gpgpu::GpuBatch,
         samples: &[frcd_gpgpu::BatchTimings],
+        clock_mhz: Option<u32>,
     ) -> Self {
         let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
         let med = |f: &dyn Fn(&frcd_gpgpu::BatchTimings) -> f64| {
@@ -173,6 +188,7 @@ impl Breakdown {
             } else {
                 Vec::new()
             },
+            clock_mhz,
         }
     }
 
@@ -183,11 +199,57 @@ impl Breakdown {
             }
             None => "no pass timers".into(),
         };
+        let clock = self
+            .clock_mhz
+            .map_or(String::new(), |c| format!(", SM clock after {c} MHz"));
         format!(
-            "{}: batch {:.2} ms = wait {:.2} ms ({gpu}) + CPU re-decision {:.2} ms of {} reported pairs ({} uncertain)",
+            "{}: batch {:.2} ms = wait {:.2} ms ({gpu}) + CPU re-decision {:.2} ms of {} reported pairs ({} uncertain){clock}",
             self.what, self.batch_ms, self.wait_ms, self.decide_ms, self.reported, self.uncertain
         )
     }
+}
+
+/// The first NVIDIA GPU's SM clock in MHz from `nvidia-smi`, or `None` (another vendor, or no
+/// `nvidia-smi`). GPU timings follow the clock the driver's governor picks: an H200 idles at
+/// 345 MHz and runs short batches with host round trips at 345-1,400 MHz, far from its 1,980.
+fn gpu_clock_mhz(vendor: u32) -> Option<u32> {
+    const NVIDIA: u32 = 0x10de;
+    if vendor != NVIDIA {
+        return None;
+    }
+    let out = std::process::Command::new("nvidia-smi")
+        .args([
+            "--query-gpu=clocks.sm",
+            "--format=csv,noheader,nounits",
+            "-i",
+            "0",
+        ])
+        .output()
+        .ok()?;
+    if !out.status.success() {
+        return None;
+    }
+    String::from_utf8(out.stdout)
+        .ok()?
+        .lines()
+        .next()?
+        .trim()
+        .parse()
+        .ok()
+}
+
+/// [`median_ms`] of GPU work, after repeating it for `warm` (at least once): a hardware GPU
+/// left idle runs at its idle clock until it has been busy for a while. Returns the median and
+/// how many untimed calls came first (callers that record a sample per call drop those).
+fn gpu_median_ms(runs: usize, warm: Duration, mut f: impl FnMut()) -> (f64, usize) {
+    let t0 = Instant::now();
+    let mut untimed = 0;
+    while untimed == 0 || t0.elapsed() < warm {
+        f();
+        untimed += 1;
+    }
+    // `median_ms` makes one untimed call of its own.
+    (median_ms(runs, f), untimed + 1)
 }
 
 /// Median wall time in ms of `runs` calls (after one warm-up call).
@@ -360,6 +422,10 @@ pub fn run(mut o: Opts) -> Result<()> {
     if let Some(on) = o.exact_offsets {
         ctx.set_exact_offsets(on);
     }
+    let warm_ms = o
+        .gpu_warmup_ms
+        .unwrap_or(if ctx.is_software() { 0 } else { 500 });
+    let warm = Duration::from_millis(warm_ms);
     let mut breakdowns: Vec<Breakdown> = Vec::new();
     let info = ctx.adapter_info().clone();
     let threads = rayon::current_num_threads();
@@ -411,7 +477,7 @@ pub fn run(mut o: Opts) -> Result<()> {
                 std::hint::black_box(collide(&tree, pa, &tree, pb, &request));
             });
         });
-        let gpu = median_ms(o.runs, || {
+        let (gpu, _) = gpu_median_ms(o.runs, warm, || {
             for (pa, pb) in &poses {
                 std::hint::black_box(
                     ctx.collide(&gpu_mesh, pa, &gpu_mesh, pb, &mut scratch)
@@ -440,13 +506,14 @@ pub fn run(mut o: Opts) -> Result<()> {
                 bail!("level {level}{label}: the batch differs from the CPU on body pair {k}");
             }
             let mut samples = Vec::new();
-            let ms = median_ms(o.runs, || {
+            let (ms, untimed) = gpu_median_ms(o.runs, warm, || {
                 let got = ctx
                     .collide_batch(&batch, &mut scratch)
                     .expect("checked above");
                 samples.push(got.timings.clone());
                 std::hint::black_box(got);
             });
+            samples.drain(..untimed);
             if recheck == frcd_gpgpu::Recheck::All {
                 gpu_batch = ms;
             }
@@ -455,6 +522,7 @@ pub fn run(mut o: Opts) -> Result<()> {
                 ms,
                 &got,
                 &samples,
+                gpu_clock_mhz(info.vendor),
             );
             println!("{}", b.line());
             breakdowns.push(b);
@@ -534,7 +602,7 @@ pub fn run(mut o: Opts) -> Result<()> {
         });
         f = 0;
         let (mut samples, mut last) = (Vec::new(), None);
-        let gpu = median_ms(o.runs, || {
+        let (gpu, untimed) = gpu_median_ms(o.runs, warm, || {
             let poses = &frames[f % nf];
             f += 1;
             let cand = broad_phase(&trees, poses);
@@ -546,12 +614,14 @@ pub fn run(mut o: Opts) -> Result<()> {
             samples.push(got.timings.clone());
             last = Some(got);
         });
+        samples.drain(..untimed);
         if let Some(got) = &last {
             let b = Breakdown::new(
                 format!("frame, {n} parts (last frame's counts)"),
                 gpu,
                 got,
                 &samples,
+                gpu_clock_mhz(info.vendor),
             );
             println!("{}", b.line());
             breakdowns.push(b);
@@ -576,7 +646,7 @@ pub fn run(mut o: Opts) -> Result<()> {
 
     let mut checker_rows: Vec<CheckerRow> = Vec::new();
     for &n in &o.checker {
-        checker_rows.push(checker_row(n, o.runs)?);
+        checker_rows.push(checker_row(n, o.runs, warm)?);
     }
 
     let mut box_rows = Vec::new();
@@ -634,14 +704,15 @@ pub fn run(mut o: Opts) -> Result<()> {
             std::hint::black_box(frcd_obb::overlapping_boxes(&boxes, 0.0));
         });
         let gpu_all = small.then(|| {
-            median_ms(o.runs, || {
+            gpu_median_ms(o.runs, warm, || {
                 std::hint::black_box(
                     ctx.overlapping_bodies_all_pairs(&boxes, &mut all_scratch)
                         .expect("checked above"),
                 );
             })
+            .0
         });
-        let gpu = median_ms(o.runs, || {
+        let (gpu, _) = gpu_median_ms(o.runs, warm, || {
             std::hint::black_box(
                 ctx.overlapping_bodies(&boxes, &mut box_scratch)
                     .expect("checked above"),
@@ -666,7 +737,7 @@ pub fn run(mut o: Opts) -> Result<()> {
     writeln!(md, "# GPGPU pipeline vs CPU OBB traversal\n")?;
     writeln!(
         md,
-        "Adapter: **{}** ({:?}, {:?}, driver {} {}). CPU: {} rayon threads. `cargo xtask bench gpgpu`, median of {} runs. Triangle pass: exact reference-point offsets {}.\n",
+        "Adapter: **{}** ({:?}, {:?}, driver {} {}). CPU: {} rayon threads. `cargo xtask bench gpgpu`, median of {} runs. Triangle pass: exact reference-point offsets {}. GPU warm-up: {} ms of the timed work before each GPU timing (`--gpu-warmup-ms`; 0: a cold GPU, at whatever clock idling left it).\n",
         info.name,
         info.backend,
         info.device_type,
@@ -674,7 +745,8 @@ pub fn run(mut o: Opts) -> Result<()> {
         info.driver_info,
         threads,
         o.runs,
-        if ctx.exact_offsets() { "on" } else { "off" }
+        if ctx.exact_offsets() { "on" } else { "off" },
+        warm_ms
     )?;
     if let (Some(a), Some(b)) = (&load_start, &load_end) {
         writeln!(
@@ -812,17 +884,21 @@ pub fn run(mut o: Opts) -> Result<()> {
         )?;
         writeln!(
             md,
-            "| batch | body pairs | reported triangle pairs | of which uncertain | batch ms | wait ms | GPU chain ms | GPU traversal levels ms | GPU triangle pass ms | CPU re-decision ms |"
+            "| batch | body pairs | reported triangle pairs | of which uncertain | batch ms | wait ms | GPU chain ms | GPU traversal levels ms | GPU triangle pass ms | CPU re-decision ms | SM clock after, MHz |"
         )?;
-        writeln!(md, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+        writeln!(
+            md,
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        )?;
         for b in &breakdowns {
             let [all, lv, tr] = match b.gpu_ms {
                 Some(g) => g.map(|x| format!("{x:.2}")),
                 None => ["—", "—", "—"].map(String::from),
             };
+            let clock = b.clock_mhz.map_or("—".to_string(), |c| c.to_string());
             writeln!(
                 md,
-                "| {} | {} | {} | {} | {:.2} | {:.2} | {all} | {lv} | {tr} | {:.2} |",
+                "| {} | {} | {} | {} | {:.2} | {:.2} | {all} | {lv} | {tr} | {:.2} | {clock} |",
                 b.what, b.body_pairs, b.reported, b.uncertain, b.batch_ms, b.wait_ms, b.decide_ms
             )?;
         }
@@ -992,7 +1068,7 @@ struct CheckerRow {
 /// The checker section for `n` parts: per-frame time of a sequence of 8 frames, median of
 /// `runs` sequences, for the CPU backend, GPGPU `check` and GPGPU `check_pipelined`; answers
 /// checked equal frame by frame.
-fn checker_row(n: usize, runs: usize) -> Result<CheckerRow> {
+fn checker_row(n: usize, runs: usize, warm: Duration) -> Result<CheckerRow> {
     use frcd_hybrid::{Backend, BodySpec, Checker, FrameState, GpuPolicy, Options, Pipeline};
     let meshes: Vec<std::sync::Arc<frcd_geom::TriMesh>> = (0..n.min(4))
         .map(|i| std::sync::Arc::new(frame_part(i)))
@@ -1067,13 +1143,15 @@ fn checker_row(n: usize, runs: usize) -> Result<CheckerRow> {
         }
     }) / nf;
     let mut s2 = FrameState::default();
-    let plain = median_ms(runs, || {
+    let (plain, untimed) = gpu_median_ms(runs, warm, || {
         for poses in &frames {
             let r = c_gpu.check(poses, &mut s2).expect("checked");
             gpu_stages.push(stages(&r));
             std::hint::black_box(r);
         }
-    }) / nf;
+    });
+    let plain = plain / nf;
+    gpu_stages.drain(..untimed * frames.len());
     let median_stages = |v: &[(f64, f64)]| {
         let mid = |mut x: Vec<f64>| {
             x.sort_by(f64::total_cmp);
@@ -1090,12 +1168,13 @@ fn checker_row(n: usize, runs: usize) -> Result<CheckerRow> {
         "checker, {n} parts, median stage times per frame: CPU backend broad {cb:.2} ms, narrow {cn:.2} ms; GPGPU check broad (GPU box pass) {gb:.2} ms, narrow (one pair batch, exact re-decision, containment) {gn:.2} ms"
     );
     let mut pipe = Pipeline::new();
-    let piped = median_ms(runs, || {
+    let (piped, _) = gpu_median_ms(runs, warm, || {
         for poses in &frames {
             std::hint::black_box(c_pipe.check_pipelined(poses, &mut pipe).expect("checked"));
         }
         std::hint::black_box(c_pipe.flush_pipelined(&mut pipe).expect("checked"));
-    }) / nf;
+    });
+    let piped = piped / nf;
     println!(
         "checker, {n} parts ({triangles} triangles): cpu {cpu_ms:.2} ms, gpgpu check {plain:.2} ms, pipelined {piped:.2} ms per frame"
     );
@@ -1112,6 +1191,27 @@ fn checker_row(n: usize, runs: usize) -> Result<CheckerRow> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn gpu_timings_warm_up_first_and_count_the_untimed_calls() {
+        // No warm-up: the one call `gpu_median_ms` always makes, and `median_ms`'s own.
+        let mut calls = 0;
+        let (_, untimed) = gpu_median_ms(3, Duration::ZERO, || calls += 1);
+        assert_eq!((untimed, calls), (2, 2 + 3));
+        // A warm-up repeats the work until its time is up; the caller drops exactly the
+        // untimed samples and keeps the timed ones.
+        let mut samples = Vec::new();
+        let (_, untimed) = gpu_median_ms(5, Duration::from_millis(20), || {
+            std::thread::sleep(Duration::from_millis(2));
+            samples.push(());
+        });
+        assert!(
+            untimed > 2,
+            "{untimed} untimed calls in 20 ms of 2 ms calls"
+        );
+        samples.drain(..untimed);
+        assert_eq!(samples.len(), 5);
+    }
 
     #[test]
     fn the_crossover_is_where_the_gpu_stays_faster() {

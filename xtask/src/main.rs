@@ -241,6 +241,14 @@ mod tests {
             panic!()
         };
         assert_eq!(o.checker, [16, 64]);
+        assert_eq!(o.gpu_warmup_ms, None);
+        let Task::Bench {
+            suite: Suite::Gpgpu(o),
+        } = parse("bench gpgpu --gpu-warmup-ms 0")
+        else {
+            panic!()
+        };
+        assert_eq!(o.gpu_warmup_ms, Some(0));
         assert!(refused("bench gpgpu --pairs 0").contains("at least 1"));
     }
 
