@@ -260,7 +260,7 @@ pub fn backends() -> Vec<Box<dyn Backend>> {
     };
     let free_gpu = CostModel {
         gpu_broad_us: Some(0.0),
-        gpu_broad_ns_per_pair: Some(0.0),
+        gpu_broad_ns_per_body: Some(0.0),
         gpu_narrow_us: Some(0.0),
         gpu_narrow_ns_per_triangle: Some(0.0),
         ..CostModel::default()

@@ -11,7 +11,12 @@ use std::path::Path;
 ///
 /// The model is linear on purpose: a fixed cost per GPU submission (dispatch, one readback)
 /// plus a cost per unit of work. The units are what the scheduler knows before it runs a stage:
-/// body pairs for the broad phase, triangles of the two bodies for a pair query.
+/// bodies for the broad phase (both backends' broad phases sort and sweep, so their cost grows
+/// about linearly with the bodies), triangles of the two bodies for a pair query.
+///
+/// Files written before the GPU box pass was modelled per body hold `gpu_broad_ns_per_pair`
+/// instead of [`CostModel::gpu_broad_ns_per_body`]: they load, without a GPU box-pass figure
+/// (so the CPU broad phase is kept) until `frcd calibrate` is run again.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CostModel {
     /// Adapter the GPU figures were measured on (empty when none).
@@ -19,12 +24,15 @@ pub struct CostModel {
     pub adapter: String,
     /// Worker threads of the CPU figures (rayon's pool size at calibration).
     pub threads: usize,
-    /// CPU sweep and prune: nanoseconds per body (sort under coherence + sweep).
+    /// CPU broad phase ([`frcd_obb::overlapping_boxes`], one thread, a fresh frame):
+    /// nanoseconds per body.
     pub cpu_broad_ns_per_body: f64,
-    /// GPU all-pairs box pass: fixed microseconds per pass.
+    /// GPU box pass (`frcd-gpgpu`'s sort-and-sweep, one submission and one readback): fixed
+    /// microseconds per pass.
     pub gpu_broad_us: Option<f64>,
-    /// GPU all-pairs box pass: nanoseconds per body pair.
-    pub gpu_broad_ns_per_pair: Option<f64>,
+    /// GPU box pass: nanoseconds per body beyond the fixed cost.
+    #[serde(default)]
+    pub gpu_broad_ns_per_body: Option<f64>,
     /// CPU exact pair query (OBB trees): nanoseconds per triangle of the two bodies, measured on
     /// pairs whose boxes overlap, one thread.
     pub cpu_narrow_ns_per_triangle: f64,
@@ -43,9 +51,9 @@ impl Default for CostModel {
         Self {
             adapter: String::new(),
             threads: 2,
-            cpu_broad_ns_per_body: 40.0,
+            cpu_broad_ns_per_body: 300.0,
             gpu_broad_us: Some(300.0),
-            gpu_broad_ns_per_pair: Some(0.002),
+            gpu_broad_ns_per_body: Some(150.0),
             cpu_narrow_ns_per_triangle: 40.0,
             gpu_narrow_us: Some(300.0),
             gpu_narrow_ns_per_triangle: Some(5.0),
@@ -183,7 +191,7 @@ impl CostModel {
         let fields: [(&'static str, Option<f64>); 8] = [
             ("cpu_broad_ns_per_body", Some(self.cpu_broad_ns_per_body)),
             ("gpu_broad_us", self.gpu_broad_us),
-            ("gpu_broad_ns_per_pair", self.gpu_broad_ns_per_pair),
+            ("gpu_broad_ns_per_body", self.gpu_broad_ns_per_body),
             (
                 "cpu_narrow_ns_per_triangle",
                 Some(self.cpu_narrow_ns_per_triangle),
@@ -213,23 +221,26 @@ impl CostModel {
     /// A model with every GPU figure removed (CPU only).
     pub fn cpu_only(mut self) -> Self {
         self.gpu_broad_us = None;
-        self.gpu_broad_ns_per_pair = None;
+        self.gpu_broad_ns_per_body = None;
         self.gpu_narrow_us = None;
         self.gpu_narrow_ns_per_triangle = None;
         self.image_us = None;
         self
     }
 
-    /// Smallest body count from which the GPU box pass is predicted to beat sweep and prune
-    /// (`None`: never, or no GPU figures).
+    /// Smallest body count from which the GPU box pass is predicted to beat the CPU broad
+    /// phase, and keeps beating it for every larger count (`None`: never, or no GPU figures).
+    /// Both are linear in the bodies, the GPU's with a fixed cost on top, so the GPU wins from
+    /// `fixed / (cpu − gpu)` bodies on when its per-body cost is the lower one.
     pub fn gpu_broad_min_bodies(&self) -> Option<usize> {
-        let (fixed, per_pair) = (self.gpu_broad_us?, self.gpu_broad_ns_per_pair?);
-        // Sweep and prune is ~linear in n under coherence; the GPU pass is all pairs.
-        (2..=1_000_000usize).find(|&n| {
-            let nf = n as f64;
-            let gpu = fixed * 1e3 + per_pair * nf * (nf - 1.0) / 2.0;
-            gpu < self.cpu_broad_ns_per_body * nf
-        })
+        let (fixed_ns, gpu) = (self.gpu_broad_us? * 1e3, self.gpu_broad_ns_per_body?);
+        let saved = self.cpu_broad_ns_per_body - gpu;
+        if saved <= 0.0 {
+            return None;
+        }
+        // The smallest n with fixed + gpu·n < cpu·n, at least 2.
+        let n = (fixed_ns / saved).floor() + 1.0;
+        (n <= 1e15).then(|| (n as usize).max(2))
     }
 
     /// True when the GPU exact pair query of a pair with `triangles` triangles in all is
@@ -278,6 +289,37 @@ mod tests {
             .gpu_broad_min_bodies()
             .expect("large scenes favour the GPU");
         assert!(n > 100, "{n}");
+        // The threshold is where the predicted costs cross, and the GPU stays ahead above it.
+        let cost = |n: usize| {
+            let nf = n as f64;
+            (
+                m.gpu_broad_us.unwrap() * 1e3 + m.gpu_broad_ns_per_body.unwrap() * nf,
+                m.cpu_broad_ns_per_body * nf,
+            )
+        };
+        for k in [n, n + 1, 10 * n, 1000 * n] {
+            let (gpu, cpu) = cost(k);
+            assert!(gpu < cpu, "{k} bodies: GPU {gpu} ns against CPU {cpu} ns");
+        }
+        let (gpu, cpu) = cost(n - 1);
+        assert!(
+            gpu >= cpu,
+            "{} bodies: GPU {gpu} ns against CPU {cpu} ns",
+            n - 1
+        );
+        // A GPU slower per body than the CPU never wins, however many bodies.
+        let slow = CostModel {
+            gpu_broad_ns_per_body: Some(m.cpu_broad_ns_per_body),
+            ..m.clone()
+        };
+        assert_eq!(slow.gpu_broad_min_bodies(), None);
+        // A free GPU pass wins from two bodies on.
+        let free = CostModel {
+            gpu_broad_us: Some(0.0),
+            gpu_broad_ns_per_body: Some(0.0),
+            ..m.clone()
+        };
+        assert_eq!(free.gpu_broad_min_bodies(), Some(2));
         assert!(!m.prefer_gpu_narrow(100));
         let t = m.gpu_narrow_min_triangles().expect("threshold");
         assert!(m.prefer_gpu_narrow(t) && !m.prefer_gpu_narrow(t - 1));
@@ -337,6 +379,30 @@ mod tests {
             CostModel::load(dir.join("missing.json")),
             Err(CostModelError::Io { .. })
         ));
+    }
+
+    #[test]
+    fn files_of_the_all_pairs_model_load_without_a_gpu_box_pass_figure() {
+        // Before 2026-11-28 the GPU box pass was costed per body pair; such a file loads, its
+        // per-pair figure is not taken as a per-body one, and the box pass stays on the CPU.
+        let dir = temp_dir("frcd-hybrid-cost-old");
+        let p = dir.join("old.json");
+        std::fs::write(
+            &p,
+            r#"{"adapter": "NVIDIA H200", "threads": 16, "cpu_broad_ns_per_body": 40.0,
+                "gpu_broad_us": 300.0, "gpu_broad_ns_per_pair": 0.002,
+                "cpu_narrow_ns_per_triangle": 40.0, "gpu_narrow_us": 300.0,
+                "gpu_narrow_ns_per_triangle": 5.0, "image_us": 1000.0}"#,
+        )
+        .unwrap();
+        let m = CostModel::load(&p).unwrap();
+        assert_eq!(
+            (m.gpu_broad_us, m.gpu_broad_ns_per_body),
+            (Some(300.0), None)
+        );
+        assert_eq!(m.gpu_broad_min_bodies(), None);
+        // The rest of the model is kept.
+        assert_eq!(m.gpu_narrow_ns_per_triangle, Some(5.0));
     }
 
     #[test]

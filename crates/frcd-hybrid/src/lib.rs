@@ -7,7 +7,7 @@
 //! 1. **Rough colliding set (RCS)** (`rcs`): body pairs whose world boxes overlap, minus
 //!    static-static and excluded pairs: the broad phase of an [`frcd_obb::World`] kept in the
 //!    caller's [`FrameState`] (candidate pairs kept over grown boxes from frame to frame), or
-//!    the all-pairs GPU box pass of `frcd-gpgpu` (feature `gpgpu`) from
+//!    the GPU box pass of `frcd-gpgpu` (feature `gpgpu`, a sort-and-sweep) from
 //!    [`CostModel::gpu_broad_min_bodies`] bodies on. Both equal the f64 box test. With a
 //!    clearance threshold the boxes are grown by it.
 //! 2. **Accurate colliding set (ACS)**, [`Accuracy::Fast`] only: the image-space pass of

@@ -320,7 +320,7 @@ fn exact_gpgpu_and_gpu_heavy_hybrid_equal_oracle() {
     // A cost model in which the GPU is free: hybrid puts broad and narrow phase on it.
     let cheap_gpu = CostModel {
         gpu_broad_us: Some(0.0),
-        gpu_broad_ns_per_pair: Some(0.0),
+        gpu_broad_ns_per_body: Some(0.0),
         gpu_narrow_us: Some(0.0),
         gpu_narrow_ns_per_triangle: Some(0.0),
         ..CostModel::default()

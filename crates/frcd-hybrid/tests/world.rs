@@ -170,7 +170,7 @@ fn software_adapters_are_costed_as_software() {
     let m = vec![Arc::new(shapes::icosphere(1.0, 2))];
     let cheap_gpu = frcd_hybrid::CostModel {
         gpu_broad_us: Some(0.0),
-        gpu_broad_ns_per_pair: Some(0.0),
+        gpu_broad_ns_per_body: Some(0.0),
         gpu_narrow_us: Some(0.0),
         gpu_narrow_ns_per_triangle: Some(0.0),
         ..frcd_hybrid::CostModel::default()
