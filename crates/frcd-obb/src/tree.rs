@@ -230,11 +230,7 @@ impl ObbTree {
             if self.quad_layer {
                 crate::wide::build_quads(&self.nodes)
             } else {
-                // No quads: every step gathers its four lanes from the nodes.
-                crate::wide::Quads {
-                    quads: Vec::new(),
-                    of: vec![crate::wide::NO_QUAD; self.nodes.len()],
-                }
+                crate::wide::Quads::without_quads(&self.nodes)
             }
         })
     }

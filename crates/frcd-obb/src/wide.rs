@@ -222,12 +222,64 @@ pub(crate) fn quad_ids(nodes: &[TNode], n: u32) -> ([u32; 4], usize) {
     (ids, len)
 }
 
+/// What the wide traversal's step decides on, per node, in 8 bytes beside the 64-byte
+/// [`TNode`]: whether it is a leaf, its split size and its quad. The paired loop pops an entry
+/// and decides "leaf pair?" and "split A or B?" on the two metas, so an A split reads neither
+/// node (its lanes come from the quad) and a B split only A's: two trees of the dense sweep
+/// hold 2.6 MB of nodes, more than a core's L2, and 0.3 MB of metas.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(8))]
+pub(crate) struct NodeMeta {
+    /// The node's quad index times four plus the lane count minus one, or [`NO_QUAD`].
+    pub quad: u32,
+    /// [`TNode::size`] for an internal node, −∞ for a leaf, so that [`NodeMeta::split_a`] is
+    /// one comparison.
+    pub size: f32,
+}
+
+impl NodeMeta {
+    /// The meta of `node` with quad entry `quad`.
+    pub fn of(node: &TNode, quad: u32) -> Self {
+        let size = if node.is_leaf() {
+            f32::NEG_INFINITY
+        } else {
+            node.size()
+        };
+        NodeMeta { quad, size }
+    }
+
+    /// A leaf.
+    #[inline(always)]
+    pub fn is_leaf(self) -> bool {
+        self.size == f32::NEG_INFINITY
+    }
+
+    /// The traversal's split rule (`split_a` in `query/traverse.rs`) on metas: split A when
+    /// `B leaf || (A internal && |A| ≥ |B|)`, which with a leaf's size −∞ is the one
+    /// comparison `|A| ≥ |B|`. The same decision as on the nodes wherever sizes are not NaN
+    /// (a built tree's half extents are finite; tested for every node pair).
+    #[inline(always)]
+    pub fn split_a(a: NodeMeta, b: NodeMeta) -> bool {
+        a.size >= b.size
+    }
+}
+
 /// The quad layer of a tree: one [`Quad`] per internal node at even depth, and per node its
-/// quad's index times four plus the lane count minus one, or [`NO_QUAD`].
+/// quad's index times four plus the lane count minus one (or [`NO_QUAD`]) in `of`, and its
+/// [`NodeMeta`] (the same quad entry, leaf flag, split size) in `metas`.
+///
+/// Both per-node arrays, because each kind of query reads one. Queries that record no front
+/// pop long runs of entries and decide them on the metas (1-3 % less time on the dense sweep's
+/// all pairs and the knots' first contact, `docs/performance/cpu-core.md`, fifteenth and
+/// sixteenth sittings). A cached query's descents from its front entries are short and
+/// scattered: they test the start pair on its two nodes, so deciding on the nodes costs no new
+/// cache line there, where the two meta lines cost 7-12 % (fifteenth sitting); they read `of`
+/// for the split node, as before the metas.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Quads {
     pub quads: Vec<Quad>,
     pub of: Vec<u32>,
+    pub metas: Vec<NodeMeta>,
 }
 
 impl Quads {
@@ -235,6 +287,16 @@ impl Quads {
     pub fn memory_bytes(&self) -> usize {
         self.quads.capacity() * std::mem::size_of::<Quad>()
             + self.of.capacity() * std::mem::size_of::<u32>()
+            + self.metas.capacity() * std::mem::size_of::<NodeMeta>()
+    }
+
+    /// The layer of `nodes` without quads: every step gathers its four lanes from the nodes.
+    pub fn without_quads(nodes: &[TNode]) -> Quads {
+        Quads {
+            quads: Vec::new(),
+            of: vec![NO_QUAD; nodes.len()],
+            metas: nodes.iter().map(|n| NodeMeta::of(n, NO_QUAD)).collect(),
+        }
     }
 }
 
@@ -259,7 +321,12 @@ pub(crate) fn build_quads(nodes: &[TNode]) -> Quads {
     }
     // The pushes may have doubled the capacity: keep only what is used.
     quads.shrink_to_fit();
-    Quads { quads, of }
+    let metas = nodes
+        .iter()
+        .zip(&of)
+        .map(|(n, &q)| NodeMeta::of(n, q))
+        .collect();
+    Quads { quads, of, metas }
 }
 
 /// The f32 test of one query (module docs).
@@ -1248,6 +1315,7 @@ mod tests {
             let (mut with, mut depth) = (0, vec![0u32; nodes.len()]);
             for n in 0..nodes.len() {
                 let q = tree.quads().of[n];
+                assert_eq!(tree.quads().metas[n], NodeMeta::of(&nodes[n], q));
                 if nodes[n].is_leaf() {
                     assert_eq!(q, NO_QUAD);
                     continue;

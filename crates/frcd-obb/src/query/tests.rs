@@ -71,6 +71,56 @@ mod traversals {
             assert!(wide_boxes < 2 * binary_boxes && binary_boxes < 2 * wide_boxes);
         }
     }
+
+    /// The wide traversal decides "leaf pair?" and "split A or B?" on the 8-byte node metas
+    /// (`wide::NodeMeta`) where it records no front, on the nodes elsewhere (and the binary
+    /// traversal on the nodes): the same decision and quad entry for every node pair of two
+    /// trees, at several leaf sizes, with the quad layer and without it.
+    #[test]
+    fn node_metas_decide_as_the_nodes_do() {
+        let ma = shapes::icosphere(1.0, 2);
+        let mb = shapes::subdivide(&shapes::cuboid(DVec3::new(0.9, 0.3, 0.6)));
+        for leaf in [1, 2, 4] {
+            for quad_layer in [true, false] {
+                let opts = BuildOptions {
+                    max_leaf_triangles: leaf,
+                    ..BuildOptions::default()
+                };
+                let ta = ObbTree::build(&ma, &opts).with_quad_layer(quad_layer);
+                let tb = ObbTree::build(&mb, &opts).with_quad_layer(quad_layer);
+                let (qa, qb) = (ta.quads(), tb.quads());
+                assert_eq!(qa.metas.len(), ta.nodes.len());
+                let (mut a_splits, mut b_splits) = (0, 0);
+                for (i, na) in ta.nodes.iter().enumerate() {
+                    assert_eq!(qa.metas[i].is_leaf(), na.is_leaf(), "leaf {leaf} node {i}");
+                    assert_eq!(qa.metas[i].quad, qa.of[i], "leaf {leaf} node {i}");
+                    for (j, nb) in tb.nodes.iter().enumerate() {
+                        let on_nodes = split_a(na, nb);
+                        assert_eq!(
+                            wide::NodeMeta::split_a(qa.metas[i], qb.metas[j]),
+                            on_nodes,
+                            "leaf {leaf} quads {quad_layer} pair {i} {j}"
+                        );
+                        let (i, j) = (i as u32, j as u32);
+                        let split = Split::on_nodes(&ta, &tb, qa, qb, i, j);
+                        assert_eq!(
+                            Split::on_metas(qa.metas[i as usize], qb.metas[j as usize]),
+                            split,
+                            "leaf {leaf} quads {quad_layer} pair {i} {j}"
+                        );
+                        assert_eq!(split.is_none(), na.is_leaf() && nb.is_leaf());
+                        if on_nodes {
+                            a_splits += 1
+                        } else {
+                            b_splits += 1
+                        }
+                    }
+                }
+                // Both outcomes occur, so the comparison above meant something.
+                assert!(a_splits > 1000 && b_splits > 1000, "{a_splits} {b_splits}");
+            }
+        }
+    }
 }
 
 /// The AVX2 build of the wide traversal against its baseline build (`isa.rs`).

@@ -8,7 +8,7 @@ use crate::isa;
 use crate::nodes::TNode;
 use crate::sat::{self, Placed};
 use crate::tree::ObbTree;
-use crate::wide::{self, ALanes, BLanes, NO_QUAD, Sat32, quad_ids};
+use crate::wide::{self, ALanes, BLanes, NO_QUAD, NodeMeta, Sat32, quad_ids};
 use frcd_geom::{Aabb, DVec3, Pose, Triangle};
 use frcd_tritri::Method;
 
@@ -20,6 +20,61 @@ use frcd_tritri::Method;
 #[inline(always)]
 pub(super) fn split_a(na: &TNode, nb: &TNode) -> bool {
     nb.is_leaf() || (!na.is_leaf() && na.size() >= nb.size())
+}
+
+/// How a traversal step splits its (not leaf) entry: A's node or B's, and the split node's
+/// quad entry ([`wide::Quads::of`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Split {
+    pub a: bool,
+    pub quad: u32,
+}
+
+impl Split {
+    /// The split of entry `(i, j)` decided on the two nodes ([`split_a`]) and the split node's
+    /// quad entry; `None` for a leaf pair.
+    #[inline(always)]
+    pub(super) fn on_nodes(
+        a: &ObbTree,
+        b: &ObbTree,
+        qa: &wide::Quads,
+        qb: &wide::Quads,
+        i: u32,
+        j: u32,
+    ) -> Option<Split> {
+        let (na, nb) = (&a.nodes[i as usize], &b.nodes[j as usize]);
+        if na.is_leaf() && nb.is_leaf() {
+            None
+        } else if split_a(na, nb) {
+            Some(Split {
+                a: true,
+                quad: qa.of[i as usize],
+            })
+        } else {
+            Some(Split {
+                a: false,
+                quad: qb.of[j as usize],
+            })
+        }
+    }
+
+    /// The same decision on the entry's two node metas; `None` for a leaf pair.
+    #[inline(always)]
+    pub(super) fn on_metas(ma: NodeMeta, mb: NodeMeta) -> Option<Split> {
+        if ma.is_leaf() && mb.is_leaf() {
+            None
+        } else if NodeMeta::split_a(ma, mb) {
+            Some(Split {
+                a: true,
+                quad: ma.quad,
+            })
+        } else {
+            Some(Split {
+                a: false,
+                quad: mb.quad,
+            })
+        }
+    }
 }
 
 /// The overlapping lanes (margin not positive, NaN included) of the first `n` of a four-lane
@@ -782,13 +837,12 @@ impl<'a> Ctx<'a> {
         }
     }
 
-    /// A's nodes two levels below internal node `i`, in lanes (from its quad, or gathered):
-    /// their ids and number, counted as box tests.
+    /// A's nodes two levels below internal node `i` (quad entry `qa`, [`wide::Quads::of`]), in
+    /// lanes (from its quad, or gathered): their ids and number, counted as box tests.
     #[inline(always)]
-    pub(super) fn a_children(&mut self, i: u32) -> ([u32; 4], usize, ALanes) {
+    pub(super) fn a_children(&mut self, i: u32, qa: u32) -> ([u32; 4], usize, ALanes) {
         let a = self.a;
         let qa_all = a.quads();
-        let qa = qa_all.of[i as usize];
         let (ids, n, lanes) = if qa != NO_QUAD {
             let q = &qa_all.quads[(qa >> 2) as usize];
             (q.ids, (qa & 3) as usize + 1, ALanes::from_quad(q))
@@ -800,13 +854,13 @@ impl<'a> Ctx<'a> {
         (ids, n, lanes)
     }
 
-    /// B's nodes two levels below internal node `j`, placed in A's frame in lanes (from its
-    /// quad, or gathered): their ids and number, counted as box tests and placements.
+    /// B's nodes two levels below internal node `j` (quad entry `qb`), placed in A's frame in
+    /// lanes (from its quad, or gathered): their ids and number, counted as box tests and
+    /// placements.
     #[inline(always)]
-    pub(super) fn b_children(&mut self, sat: &Sat32, j: u32) -> ([u32; 4], usize, BLanes) {
+    pub(super) fn b_children(&mut self, sat: &Sat32, j: u32, qb: u32) -> ([u32; 4], usize, BLanes) {
         let b = self.b;
         let qb_all = b.quads();
-        let qb = qb_all.of[j as usize];
         let (ids, n, lanes) = if qb != NO_QUAD {
             let q = &qb_all.quads[(qb >> 2) as usize];
             (q.ids, (qb & 3) as usize + 1, sat.place_quad(q))
@@ -819,21 +873,19 @@ impl<'a> Ctx<'a> {
         (ids, n, lanes)
     }
 
-    /// The lanes of one traversal step on the stack entry `(i, j, p)` (not a leaf pair): the
-    /// split node's children two levels down against the other node, counted as box tests
-    /// (and placements, where B's children are placed).
+    /// The lanes of one traversal step on the stack entry `(i, j, p)` (not a leaf pair; split
+    /// as `split` says): the split node's children two levels down against the other node,
+    /// counted as box tests (and placements, where B's children are placed).
     #[inline(always)]
     pub(super) fn step_lanes(
         &mut self,
         sat: &Sat32,
         stack: &mut Stack,
         (i, j, p): (u32, u32, u32),
+        split: Split,
     ) -> Step {
-        let (a, b) = (self.a, self.b);
-        let na = &a.nodes[i as usize];
-        let nb = &b.nodes[j as usize];
-        if split_a(na, nb) {
-            let (ids, n, lanes) = self.a_children(i);
+        if split.a {
+            let (ids, n, lanes) = self.a_children(i, split.quad);
             let pb = stack.placed32[(p >> 2) as usize].broadcast((p & 3) as usize);
             Step {
                 meta: StepMeta {
@@ -847,7 +899,7 @@ impl<'a> Ctx<'a> {
                 b: pb,
             }
         } else {
-            let (ids, n, lanes) = self.b_children(sat, j);
+            let (ids, n, lanes) = self.b_children(sat, j, split.quad);
             // Stored at once as a new block (a copy of the lanes kept in the step went
             // through memcpy twice). The caller pushes B splits' entries after A splits'.
             let block = stack.placed32.len() as u32;
@@ -860,7 +912,7 @@ impl<'a> Ctx<'a> {
                     n,
                     block,
                 },
-                a: ALanes::splat(na),
+                a: ALanes::splat(&self.a.nodes[i as usize]),
                 b: BLanes::default(),
             }
         }
@@ -874,7 +926,9 @@ impl<'a> Ctx<'a> {
     /// stack; both builds take the same order, so their answers, counters and (with `RECORD`,
     /// a front being recorded, each separated lane with its margin) fronts are the same bit for
     /// bit. Disjoint near-contact knots: 545 → 486 thousand instructions per query, 18 % less
-    /// time (`docs/performance/cpu-core.md`, eighth sitting). True when `hit` stopped the
+    /// time (`docs/performance/cpu-core.md`, eighth sitting). Each popped entry is decided
+    /// (leaf pair, or which node to split) on the node metas where no front is recorded, on
+    /// the nodes where one is ([`wide::Quads`] says why). True when `hit` stopped the
     /// traversal.
     #[inline(always)]
     pub(super) fn paired_steps<const AVX: bool, const RECORD: bool>(
@@ -887,11 +941,20 @@ impl<'a> Ctx<'a> {
         hit: &mut impl FnMut(u32, u32) -> bool,
     ) -> bool {
         let (a, b) = (self.a, self.b);
+        let (qa, qb) = (a.quads(), b.quads());
+        // Where a front is recorded, on the nodes; elsewhere on the metas (`wide::Quads`).
+        let decide = |i: u32, j: u32| {
+            if RECORD {
+                Split::on_nodes(a, b, qa, qb, i, j)
+            } else {
+                Split::on_metas(qa.metas[i as usize], qb.metas[j as usize])
+            }
+        };
         let s = sat.s();
         while stack.pairs.len() > base {
             let (i, j, p) = stack.pairs.pop().expect("non-empty");
             stack.placed32.truncate((p >> 2) as usize + 1);
-            if a.nodes[i as usize].is_leaf() && b.nodes[j as usize].is_leaf() {
+            let Some(split) = decide(i, j) else {
                 if RECORD {
                     record_pairs(front, std::iter::once((i, j)));
                 }
@@ -905,25 +968,24 @@ impl<'a> Ctx<'a> {
                     return true;
                 }
                 continue;
-            }
+            };
             // The entry below, unless it is a leaf pair. Its block is at most the first's, so
             // the truncation above kept it.
             let second = match stack.pairs.last() {
                 Some(&(i2, j2, p2)) if stack.pairs.len() > base => {
-                    let leaves = a.nodes[i2 as usize].is_leaf() && b.nodes[j2 as usize].is_leaf();
-                    (!leaves).then_some((i2, j2, p2))
+                    decide(i2, j2).map(|split2| ((i2, j2, p2), split2))
                 }
                 _ => None,
             };
             let Some(entry2) = second else {
-                let first = self.step_lanes(sat, stack, (i, j, p));
+                let first = self.step_lanes(sat, stack, (i, j, p), split);
                 let m = wide::separation4(&first.a, first.b(stack), s, (1 << first.meta.n) - 1);
                 first.meta.push::<RECORD>(stack, front, m);
                 continue;
             };
             stack.pairs.pop();
             let (first, m1, second, m2) =
-                self.paired_test::<AVX, RECORD>(sat, stack, (i, j, p), entry2);
+                self.paired_test::<AVX, RECORD>(sat, stack, ((i, j, p), split), entry2);
             // Blocks must not decrease up the stack: the A splits' entries (which name blocks
             // already there) go first, the second's below the first's, then the B splits'
             // (new blocks, the first's before the second's).
@@ -950,8 +1012,8 @@ impl<'a> Ctx<'a> {
         &mut self,
         sat: &Sat32,
         stack: &mut Stack,
-        entry1: (u32, u32, u32),
-        entry2: (u32, u32, u32),
+        entry1: ((u32, u32, u32), Split),
+        entry2: ((u32, u32, u32), Split),
     ) -> (StepMeta, wide::F4, StepMeta, wide::F4) {
         let s = sat.s();
         #[cfg(target_arch = "x86_64")]
@@ -960,15 +1022,15 @@ impl<'a> Ctx<'a> {
             // CPU reports AVX2 (`Ctx::new`, `isa::has_avx2`).
             #[allow(unsafe_code)]
             unsafe {
-                let (first, h1) = self.step_half(sat, stack, entry1);
-                let (second, h2) = self.step_half(sat, stack, entry2);
+                let (first, h1) = self.step_half(sat, stack, entry1.0, entry1.1);
+                let (second, h2) = self.step_half(sat, stack, entry2.0, entry2.1);
                 let active = ((1 << first.n) - 1) | (((1 << second.n) - 1) << 4);
                 let (m1, m2) = wide::avx::separation8::<MARGINS>(&h1, &h2, s, active);
                 return (first, m1, second, m2);
             }
         }
-        let first = self.step_lanes(sat, stack, entry1);
-        let second = self.step_lanes(sat, stack, entry2);
+        let first = self.step_lanes(sat, stack, entry1.0, entry1.1);
+        let second = self.step_lanes(sat, stack, entry2.0, entry2.1);
         let m1 = wide::separation4(&first.a, first.b(stack), s, (1 << first.meta.n) - 1);
         let m2 = wide::separation4(&second.a, second.b(stack), s, (1 << second.meta.n) - 1);
         (first.meta, m1, second.meta, m2)
@@ -988,13 +1050,12 @@ impl<'a> Ctx<'a> {
         sat: &Sat32,
         stack: &mut Stack,
         (i, j, p): (u32, u32, u32),
+        split: Split,
     ) -> (StepMeta, wide::avx::Half) {
-        let (a, b) = (self.a, self.b);
-        let na = &a.nodes[i as usize];
-        let nb = &b.nodes[j as usize];
-        if split_a(na, nb) {
+        let a = self.a;
+        if split.a {
             let qa_all = a.quads();
-            let qa = qa_all.of[i as usize];
+            let qa = split.quad;
             let placed = &stack.placed32[(p >> 2) as usize];
             let k = (p & 3) as usize;
             // SAFETY (both calls): the caller guarantees AVX2.
@@ -1018,9 +1079,9 @@ impl<'a> Ctx<'a> {
             };
             (meta, half)
         } else {
-            let (ids, n, lanes) = self.b_children(sat, j);
+            let (ids, n, lanes) = self.b_children(sat, j, split.quad);
             // SAFETY: the caller guarantees AVX2.
-            let half = unsafe { wide::avx::b_split(na, &lanes) };
+            let half = unsafe { wide::avx::b_split(&a.nodes[i as usize], &lanes) };
             let block = stack.placed32.len() as u32;
             stack.placed32.push(lanes);
             let meta = StepMeta {
@@ -1049,7 +1110,7 @@ impl<'a> Ctx<'a> {
         hit: &mut impl FnMut(u32, u32) -> bool,
         mut ordered: u32,
     ) -> Option<bool> {
-        let (a, b) = (self.a, self.b);
+        let (ma_all, mb_all) = (&self.a.quads().metas, &self.b.quads().metas);
         let s = sat.s();
         while stack.pairs.len() > base {
             if ordered == 0 {
@@ -1057,9 +1118,8 @@ impl<'a> Ctx<'a> {
             }
             let (i, j, p) = stack.pairs.pop().expect("non-empty");
             stack.placed32.truncate((p >> 2) as usize + 1);
-            let na = &a.nodes[i as usize];
-            let nb = &b.nodes[j as usize];
-            if na.is_leaf() && nb.is_leaf() {
+            let (ma, mb) = (ma_all[i as usize], mb_all[j as usize]);
+            if ma.is_leaf() && mb.is_leaf() {
                 if self.leaf_pair((&mut stack.leaves, &mut stack.a_leaves), i, j, hit) {
                     stack.pairs.truncate(base);
                     stack.placed32.truncate(pbase);
@@ -1068,8 +1128,8 @@ impl<'a> Ctx<'a> {
                 continue;
             }
             ordered -= 1;
-            if split_a(na, nb) {
-                let (ids, n, lanes) = self.a_children(i);
+            if NodeMeta::split_a(ma, mb) {
+                let (ids, n, lanes) = self.a_children(i, ma.quad);
                 let pb = stack.placed32[(p >> 2) as usize].broadcast((p & 3) as usize);
                 let m = wide::separation4(&lanes, &pb, s, (1 << n) - 1);
                 let (order, len) = deepest_last(&m, n);
@@ -1077,7 +1137,8 @@ impl<'a> Ctx<'a> {
                     stack.pairs.push((ids[k], j, p));
                 }
             } else {
-                let (ids, n, lanes) = self.b_children(sat, j);
+                let (ids, n, lanes) = self.b_children(sat, j, mb.quad);
+                let na = &self.a.nodes[i as usize];
                 let m = wide::separation4(&ALanes::splat(na), &lanes, s, (1 << n) - 1);
                 let block = (stack.placed32.len() as u32) << 2;
                 stack.placed32.push(lanes);
