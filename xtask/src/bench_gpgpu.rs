@@ -209,27 +209,61 @@ impl Breakdown {
     }
 }
 
-/// The first NVIDIA GPU's SM clock in MHz from `nvidia-smi`, or `None` (another vendor, or no
-/// `nvidia-smi`). GPU timings follow the clock the driver's governor picks: an H200 idles at
+/// The first NVIDIA GPU's SM clock in MHz from `nvidia-smi`, or `None` (another vendor, no
+/// `nvidia-smi`, or no answer within [`CLOCK_QUERY_TIMEOUT`]: a hung driver tool must not hang
+/// the bench). GPU timings follow the clock the driver's governor picks: an H200 idles at
 /// 345 MHz and runs short batches with host round trips at 345-1,400 MHz, far from its 1,980.
 fn gpu_clock_mhz(vendor: u32) -> Option<u32> {
     const NVIDIA: u32 = 0x10de;
     if vendor != NVIDIA {
         return None;
     }
-    let out = std::process::Command::new("nvidia-smi")
-        .args([
-            "--query-gpu=clocks.sm",
-            "--format=csv,noheader,nounits",
-            "-i",
-            "0",
-        ])
-        .output()
+    let mut cmd = std::process::Command::new("nvidia-smi");
+    cmd.args([
+        "--query-gpu=clocks.sm",
+        "--format=csv,noheader,nounits",
+        "-i",
+        "0",
+    ]);
+    parse_clock(&output_within(cmd, CLOCK_QUERY_TIMEOUT)?)
+}
+
+/// How long the bench waits for `nvidia-smi` to print a clock (it answers in tens of ms).
+const CLOCK_QUERY_TIMEOUT: Duration = Duration::from_secs(3);
+
+/// The standard output of `cmd` when it exits successfully within `timeout`; otherwise the
+/// process is killed and reaped, and `None`.
+fn output_within(mut cmd: std::process::Command, timeout: Duration) -> Option<Vec<u8>> {
+    use std::io::Read;
+    let mut child = cmd
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
         .ok()?;
-    if !out.status.success() {
-        return None;
+    let deadline = Instant::now() + timeout;
+    loop {
+        match child.try_wait() {
+            Ok(Some(status)) => {
+                let mut out = Vec::new();
+                child.stdout.take()?.read_to_end(&mut out).ok()?;
+                return status.success().then_some(out);
+            }
+            Ok(None) if Instant::now() < deadline => {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            _ => {
+                let _ = child.kill();
+                let _ = child.wait();
+                return None;
+            }
+        }
     }
-    String::from_utf8(out.stdout)
+}
+
+/// The first line of `nvidia-smi`'s answer as MHz.
+fn parse_clock(out: &[u8]) -> Option<u32> {
+    std::str::from_utf8(out)
         .ok()?
         .lines()
         .next()?
@@ -1191,6 +1225,25 @@ fn checker_row(n: usize, runs: usize, warm: Duration) -> Result<CheckerRow> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The clock query gives up on a tool that hangs (killing it) and reads one that answers.
+    #[cfg(unix)]
+    #[test]
+    fn a_hung_clock_tool_times_out_and_a_quick_one_is_read() {
+        let mut hung = std::process::Command::new("sh");
+        hung.args(["-c", "sleep 30"]);
+        let t0 = Instant::now();
+        assert_eq!(output_within(hung, Duration::from_millis(200)), None);
+        assert!(t0.elapsed() < Duration::from_secs(10), "{:?}", t0.elapsed());
+        let mut quick = std::process::Command::new("sh");
+        quick.args(["-c", "echo ' 1410'; echo 345"]);
+        let out = output_within(quick, Duration::from_secs(10)).expect("answered");
+        assert_eq!(parse_clock(&out), Some(1410));
+        let mut failing = std::process::Command::new("sh");
+        failing.args(["-c", "echo 1410; exit 3"]);
+        assert_eq!(output_within(failing, Duration::from_secs(10)), None);
+        assert_eq!(parse_clock(b"N/A\n"), None);
+    }
 
     #[test]
     fn gpu_timings_warm_up_first_and_count_the_untimed_calls() {
