@@ -142,8 +142,8 @@ pub struct ObbTree {
     pub(crate) closed: bool,
     /// The derived four-lane layer of the wide traversal (`wide.rs`): the nodes two levels
     /// below each internal node at even depth, in lanes, and per node its quad's index · 4 +
-    /// lanes − 1 (or [`crate::wide::NO_QUAD`]). Built by the first collision query, so the
-    /// build and trees never queried pay nothing.
+    /// lanes − 1 (or [`crate::wide::NO_QUAD`]) and its [`crate::wide::NodeMeta`]. Built by
+    /// the first collision query, so the build and trees never queried pay nothing.
     pub(crate) quads: std::sync::OnceLock<crate::wide::Quads>,
     /// Whether the first query builds the quad layer (see [`ObbTree::with_quad_layer`]).
     quad_layer: bool,
@@ -237,10 +237,11 @@ impl ObbTree {
 
     /// The tree with or without the wide traversal's quad layer (on by default). The layer
     /// copies the nodes two levels below each internal node at even depth into four-lane
-    /// blocks (about 77 B per triangle at leaf 2, built by the first collision query), so a
-    /// traversal step loads its lanes instead of gathering four nodes. Without it mesh + tree
-    /// stay at about 108-117 B per triangle and the box work is slower (the crate README gives
-    /// the measured cost); answers are the same either way.
+    /// blocks (with the per-node metas, about 87 B per triangle at leaf 2, built by the first
+    /// collision query), so a traversal step loads its lanes instead of gathering four nodes.
+    /// Without it mesh + tree take about 108-117 B per triangle, plus about 15 for the
+    /// per-node metas once queried, and the box work is slower (the crate README gives the
+    /// measured cost); answers are the same either way.
     ///
     /// ```
     /// use frcd_obb::{BuildOptions, ObbTree};
