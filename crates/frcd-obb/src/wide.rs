@@ -268,13 +268,13 @@ impl NodeMeta {
 /// quad's index times four plus the lane count minus one (or [`NO_QUAD`]) in `of`, and its
 /// [`NodeMeta`] (the same quad entry, leaf flag, split size) in `metas`.
 ///
-/// Both per-node arrays, because each kind of query reads one. Queries that record no front
-/// pop long runs of entries and decide them on the metas (1-3 % less time on the dense sweep's
-/// all pairs and the knots' first contact, `docs/performance/cpu-core.md`, fifteenth and
-/// sixteenth sittings). A cached query's descents from its front entries are short and
-/// scattered: they test the start pair on its two nodes, so deciding on the nodes costs no new
-/// cache line there, where the two meta lines cost 7-12 % (fifteenth sitting); they read `of`
-/// for the split node, as before the metas.
+/// Both per-node arrays, because each kind of descent reads one. Descents from the roots (every
+/// plain query, and the cache's fresh traversals) pop long runs of entries and decide them on
+/// the metas (1-6 % less time, `docs/performance/cpu-core.md`, fifteenth and sixteenth
+/// sittings). A cached query's descents from its front entries are short and scattered: they
+/// test the start pair on its two nodes, so deciding on the nodes costs no new cache line
+/// there, where the two meta lines cost 7-12 % on a host with a small L2 (fifteenth sitting);
+/// they read `of` for the split node, as before the metas.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Quads {
     pub quads: Vec<Quad>,

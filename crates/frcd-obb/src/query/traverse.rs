@@ -831,9 +831,12 @@ impl<'a> Ctx<'a> {
         }
         // One instance per case, so that the plain loop carries no front checks.
         if front.is_none() {
-            self.paired_steps::<AVX, false>(sat, base, pbase, stack, &mut front, hit)
+            self.paired_steps::<AVX, false>(sat, base, pbase, stack, &mut front, hit, false)
         } else {
-            self.paired_steps::<AVX, true>(sat, base, pbase, stack, &mut front, hit)
+            // A descent from the roots is long (the cache's fresh traversal): on the metas. One
+            // from a front entry is short and starts on two nodes just tested: on the nodes.
+            let on_nodes = (i, j) != (0, 0);
+            self.paired_steps::<AVX, true>(sat, base, pbase, stack, &mut front, hit, on_nodes)
         }
     }
 
@@ -927,10 +930,11 @@ impl<'a> Ctx<'a> {
     /// a front being recorded, each separated lane with its margin) fronts are the same bit for
     /// bit. Disjoint near-contact knots: 545 → 486 thousand instructions per query, 18 % less
     /// time (`docs/performance/cpu-core.md`, eighth sitting). Each popped entry is decided
-    /// (leaf pair, or which node to split) on the node metas where no front is recorded, on
-    /// the nodes where one is ([`wide::Quads`] says why). True when `hit` stopped the
-    /// traversal.
+    /// (leaf pair, or which node to split) on the nodes where `RECORD && on_nodes` (the
+    /// cache's descents from its front entries), else on the node metas ([`wide::Quads`] says
+    /// why). True when `hit` stopped the traversal.
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn paired_steps<const AVX: bool, const RECORD: bool>(
         &mut self,
         sat: &Sat32,
@@ -939,12 +943,13 @@ impl<'a> Ctx<'a> {
         stack: &mut Stack,
         front: &mut Recording<'_>,
         hit: &mut impl FnMut(u32, u32) -> bool,
+        on_nodes: bool,
     ) -> bool {
         let (a, b) = (self.a, self.b);
         let (qa, qb) = (a.quads(), b.quads());
         // Where a front is recorded, on the nodes; elsewhere on the metas (`wide::Quads`).
         let decide = |i: u32, j: u32| {
-            if RECORD {
+            if RECORD && on_nodes {
                 Split::on_nodes(a, b, qa, qb, i, j)
             } else {
                 Split::on_metas(qa.metas[i as usize], qb.metas[j as usize])
