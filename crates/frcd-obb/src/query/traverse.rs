@@ -947,7 +947,8 @@ impl<'a> Ctx<'a> {
     ) -> bool {
         let (a, b) = (self.a, self.b);
         let (qa, qb) = (a.quads(), b.quads());
-        // Where a front is recorded, on the nodes; elsewhere on the metas (`wide::Quads`).
+        // A recorded descent from a front entry decides on the nodes, every other descent on
+        // the metas (`wide::Quads`); the same decisions either way.
         let decide = |i: u32, j: u32| {
             if RECORD && on_nodes {
                 Split::on_nodes(a, b, qa, qb, i, j)
