@@ -232,7 +232,9 @@ fn gpu_clock_mhz(vendor: u32) -> Option<u32> {
 const CLOCK_QUERY_TIMEOUT: Duration = Duration::from_secs(3);
 
 /// The standard output of `cmd` when it exits successfully within `timeout`; otherwise the
-/// process is killed and reaped, and `None`.
+/// process is killed and reaped, and `None`. The output is read after the exit, so it is for
+/// tools that print less than a pipe holds (64 KiB on Linux): a longer answer would block the
+/// tool until the timeout.
 fn output_within(mut cmd: std::process::Command, timeout: Duration) -> Option<Vec<u8>> {
     use std::io::Read;
     let mut child = cmd
@@ -1231,7 +1233,7 @@ mod tests {
     #[test]
     fn a_hung_clock_tool_times_out_and_a_quick_one_is_read() {
         let mut hung = std::process::Command::new("sh");
-        hung.args(["-c", "sleep 30"]);
+        hung.args(["-c", "exec sleep 30"]);
         let t0 = Instant::now();
         assert_eq!(output_within(hung, Duration::from_millis(200)), None);
         assert!(t0.elapsed() < Duration::from_secs(10), "{:?}", t0.elapsed());

@@ -73,9 +73,10 @@ mod traversals {
     }
 
     /// The wide traversal decides "leaf pair?" and "split A or B?" on the 8-byte node metas
-    /// (`wide::NodeMeta`) where it records no front, on the nodes elsewhere (and the binary
-    /// traversal on the nodes): the same decision and quad entry for every node pair of two
-    /// trees, at several leaf sizes, with the quad layer and without it.
+    /// (`wide::NodeMeta`) in descents from the roots, on the nodes in the cache's descents from
+    /// its front entries (and the binary traversal on the nodes): the same decision and quad
+    /// entry for every node pair of two trees, at several leaf sizes, with the quad layer and
+    /// without it.
     #[test]
     fn node_metas_decide_as_the_nodes_do() {
         let ma = shapes::icosphere(1.0, 2);
