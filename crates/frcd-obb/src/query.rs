@@ -9,12 +9,14 @@
 //! witness neighbourhood).
 
 mod cache;
+mod hits;
 #[cfg(test)]
 mod tests;
 mod traverse;
 
 pub use cache::PairCache;
-use cache::{NEIGHBOURHOOD_LEVELS, ancestor, hit_fn, walk_or_traverse};
+use cache::{NEIGHBOURHOOD_LEVELS, ancestor, walk_or_traverse};
+use hits::{AllHits, FirstHit};
 use traverse::{Ctx, PooledStack, ordered_steps};
 
 use crate::sat::SLACK_REL;
@@ -356,18 +358,11 @@ pub fn collide(
         Mode::FirstContact => {
             ctx.ordered_steps = ordered_steps();
             let mut w = None;
-            ctx.descend(0, 0, &mut stack, None, &mut |x, y| {
-                w = Some((x, y));
-                true
-            });
+            ctx.descend(0, 0, &mut stack, None, &mut FirstHit(&mut w));
             c.witness = w;
         }
         Mode::AllPairs => {
-            let pairs = &mut c.pairs;
-            ctx.descend(0, 0, &mut stack, None, &mut |x, y| {
-                pairs.push((x, y));
-                false
-            });
+            ctx.descend(0, 0, &mut stack, None, &mut AllHits(&mut c.pairs));
         }
     }
     finish(&ctx, request, c)
@@ -427,21 +422,28 @@ pub fn collide_cached(
             let na = ancestor(&a.nodes, la, NEIGHBOURHOOD_LEVELS);
             let nb = ancestor(&b.nodes, lb, NEIGHBOURHOOD_LEVELS);
             let mut stack = PooledStack::take();
-            let mut hit = hit_fn(true, &mut found, &mut c.pairs);
-            ctx.descend(na, nb, &mut stack, None, &mut hit);
+            ctx.descend(na, nb, &mut stack, None, &mut FirstHit(&mut found));
             searched_all = (na, nb) == (0, 0);
         }
     }
     if found.is_none() && !searched_all {
-        walk_or_traverse(
-            &mut ctx,
-            cache,
-            first,
-            coherent,
-            was_touching,
-            &mut found,
-            &mut c.pairs,
-        );
+        if first {
+            walk_or_traverse(
+                &mut ctx,
+                cache,
+                coherent,
+                was_touching,
+                &mut FirstHit(&mut found),
+            );
+        } else {
+            walk_or_traverse(
+                &mut ctx,
+                cache,
+                coherent,
+                was_touching,
+                &mut AllHits(&mut c.pairs),
+            );
+        }
     }
     if first {
         c.witness = found;

@@ -3,6 +3,7 @@
 //! neighbourhood.
 
 use super::RelativeFrame;
+use super::hits::{Hits, Restart};
 use super::traverse::{Ctx, PooledStack};
 use crate::nodes::TNode;
 use crate::tree::ObbTree;
@@ -278,16 +279,14 @@ pub(super) fn scaled_spectral_bound(d: DMat3) -> f64 {
 }
 
 /// The front walk or a fresh traversal of a cached query ([`collide_cached`](crate::collide_cached), after its cheap
-/// rejections), under the cache's work budget and back-off: fills `found` (first contact) or
-/// `pairs` (all pairs), records the next front where the next query will try it.
+/// rejections), under the cache's work budget and back-off: fills `hits`, records the next
+/// front where the next query will try it.
 pub(super) fn walk_or_traverse(
     ctx: &mut Ctx<'_>,
     cache: &mut PairCache,
-    first: bool,
     coherent: bool,
     was_touching: bool,
-    found: &mut Option<(u32, u32)>,
-    pairs: &mut Vec<(u32, u32)>,
+    hits: &mut impl Restart,
 ) {
     let mut use_front = coherent && !cache.front.is_empty() && cache.skip == 0;
     if use_front {
@@ -296,16 +295,14 @@ pub(super) fn walk_or_traverse(
         // The walk may spend at most 40 % of a fresh traversal: a stale front is abandoned
         // early.
         let budget = 2 * cache.fresh_work / 5;
-        let mut hit = hit_fn(first, found, pairs);
         let (done, charged) = walk_front(
             ctx,
             &mut cache.front,
             &mut cache.scratch,
             cache.clock,
             budget,
-            &mut hit,
+            hits,
         );
-        drop(hit);
         let work = ctx.counters.work() - before + walked as u64 / 8 + charged;
         if !done || 5 * work > 3 * cache.fresh_work {
             // The front saved less than 40 % of a fresh traversal's work: drop it and back off
@@ -321,8 +318,7 @@ pub(super) fn walk_or_traverse(
         if !done {
             // Abandoned half way: start again from the root (the pairs found so far would be
             // found again).
-            pairs.clear();
-            *found = None;
+            hits.clear();
             use_front = false;
         }
     }
@@ -334,13 +330,12 @@ pub(super) fn walk_or_traverse(
         front.clear();
         let before = ctx.counters.work();
         let mut stack = PooledStack::take();
-        let mut hit = hit_fn(first, found, pairs);
         ctx.descend(
             0,
             0,
             &mut stack,
             record.then_some((&mut front, cache.clock)),
-            &mut hit,
+            hits,
         );
         // A running mean: a first-contact traversal's work varies with where the hit is.
         let work = ctx.counters.work() - before;
@@ -393,24 +388,6 @@ pub(super) fn ancestor(nodes: &[TNode], leaf: u32, levels: usize) -> u32 {
     }
 }
 
-/// The hit callback of a cached query: first contact stores the pair and stops, all pairs
-/// collects them.
-pub(super) fn hit_fn<'a>(
-    first: bool,
-    found: &'a mut Option<(u32, u32)>,
-    pairs: &'a mut Vec<(u32, u32)>,
-) -> impl FnMut(u32, u32) -> bool + 'a {
-    move |x, y| {
-        if first {
-            *found = Some((x, y));
-            true
-        } else {
-            pairs.push((x, y));
-            false
-        }
-    }
-}
-
 /// Work charged on top of a front walk's counters per four-lane re-test of expired entries
 /// (and, on the f64 traversal, per descent, each of which re-tests one entry): the walk's
 /// gathers and scattered loads cost more per test than a fresh wide traversal's steps, so its
@@ -445,7 +422,7 @@ pub(super) fn walk_front(
     scratch: &mut Front,
     clock: f64,
     budget: u64,
-    hit: &mut impl FnMut(u32, u32) -> bool,
+    hit: &mut impl Hits,
 ) -> (bool, u64) {
     #[cfg(target_arch = "x86_64")]
     if ctx.avx2 {
@@ -466,7 +443,7 @@ pub(super) fn walk_front_avx2(
     scratch: &mut Front,
     clock: f64,
     budget: u64,
-    hit: &mut impl FnMut(u32, u32) -> bool,
+    hit: &mut impl Hits,
 ) -> (bool, u64) {
     walk_front_body(ctx, front, scratch, clock, budget, hit)
 }
@@ -479,7 +456,7 @@ pub(super) fn walk_front_body(
     scratch: &mut Front,
     clock: f64,
     budget: u64,
-    hit: &mut impl FnMut(u32, u32) -> bool,
+    hit: &mut impl Hits,
 ) -> (bool, u64) {
     let start = ctx.counters.work();
     let mut charged = 0u64;

@@ -3,6 +3,7 @@
 //! descent for magnitudes f32 cannot hold, and the leaf tests.
 
 use super::cache::{Recording, record_pairs, record_separated};
+use super::hits::Hits;
 use super::{Containment, Counters, RelativeFrame, TopVolume, contained, query_slack};
 use crate::isa;
 use crate::nodes::TNode;
@@ -552,7 +553,7 @@ impl<'a> Ctx<'a> {
         (leaves, a_leaves): (&mut PlacedLeaves, &mut PlacedLeaves),
         i: u32,
         j: u32,
-        hit: &mut impl FnMut(u32, u32) -> bool,
+        hit: &mut impl Hits,
     ) -> bool {
         self.last_leaves = (i, j);
         let tas = self.a.node_triangles(i);
@@ -594,7 +595,7 @@ impl<'a> Ctx<'a> {
             // Larger leaves (a build option): triangle by triangle.
             for &ta in tas {
                 for &tb in tbs {
-                    if self.tri_pair(ta, tb) && hit(ta, tb) {
+                    if self.tri_pair(ta, tb) && hit.hit(ta, tb) {
                         return true;
                     }
                 }
@@ -611,7 +612,7 @@ impl<'a> Ctx<'a> {
         tas: &[u32],
         placed: &[PlacedTriangle],
         tbs: &[u32],
-        hit: &mut impl FnMut(u32, u32) -> bool,
+        hit: &mut impl Hits,
     ) -> bool {
         let a = self.a;
         for &ta in tas {
@@ -632,10 +633,10 @@ impl<'a> Ctx<'a> {
         t1: &PlacedTriangle,
         placed: &[PlacedTriangle],
         tbs: &[u32],
-        hit: &mut impl FnMut(u32, u32) -> bool,
+        hit: &mut impl Hits,
     ) -> bool {
         for (t2, &tb) in placed.iter().zip(tbs) {
-            if self.placed_tri_pair(t1, t2) && hit(ta, tb) {
+            if self.placed_tri_pair(t1, t2) && hit.hit(ta, tb) {
                 return true;
             }
         }
@@ -648,7 +649,7 @@ impl<'a> Ctx<'a> {
         &mut self,
         tas: &[u32],
         tbs: &[u32; N],
-        hit: &mut impl FnMut(u32, u32) -> bool,
+        hit: &mut impl Hits,
     ) -> bool {
         let b = self.b;
         // A plain loop over a filled array: `array::from_fn` kept its closure out of line
@@ -671,7 +672,7 @@ impl<'a> Ctx<'a> {
         j: u32,
         stack: &mut Stack,
         front: Recording<'_>,
-        hit: &mut impl FnMut(u32, u32) -> bool,
+        hit: &mut impl Hits,
     ) -> bool {
         match self.sat32 {
             Some(sat) => self.descend_wide(&sat, i, j, None, stack, front, hit),
@@ -686,7 +687,7 @@ impl<'a> Ctx<'a> {
         j: u32,
         stack: &mut Stack,
         mut front: Recording<'_>,
-        hit: &mut impl FnMut(u32, u32) -> bool,
+        hit: &mut impl Hits,
     ) -> bool {
         let base = stack.pairs.len();
         let pbase = stack.placed.len();
@@ -753,7 +754,7 @@ impl<'a> Ctx<'a> {
         overlapping_start: Option<BLanes>,
         stack: &mut Stack,
         front: Recording<'_>,
-        hit: &mut impl FnMut(u32, u32) -> bool,
+        hit: &mut impl Hits,
     ) -> bool {
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
@@ -780,7 +781,7 @@ impl<'a> Ctx<'a> {
         overlapping_start: Option<BLanes>,
         stack: &mut Stack,
         front: Recording<'_>,
-        hit: &mut impl FnMut(u32, u32) -> bool,
+        hit: &mut impl Hits,
     ) -> bool {
         self.descend_wide_body::<true>(sat, i, j, overlapping_start, stack, front, hit)
     }
@@ -797,7 +798,7 @@ impl<'a> Ctx<'a> {
         overlapping_start: Option<BLanes>,
         stack: &mut Stack,
         mut front: Recording<'_>,
-        hit: &mut impl FnMut(u32, u32) -> bool,
+        hit: &mut impl Hits,
     ) -> bool {
         let base = stack.pairs.len();
         let pbase = stack.placed32.len();
@@ -942,7 +943,7 @@ impl<'a> Ctx<'a> {
         pbase: usize,
         stack: &mut Stack,
         front: &mut Recording<'_>,
-        hit: &mut impl FnMut(u32, u32) -> bool,
+        hit: &mut impl Hits,
         on_nodes: bool,
     ) -> bool {
         let (a, b) = (self.a, self.b);
@@ -1113,7 +1114,7 @@ impl<'a> Ctx<'a> {
         base: usize,
         pbase: usize,
         stack: &mut Stack,
-        hit: &mut impl FnMut(u32, u32) -> bool,
+        hit: &mut impl Hits,
         mut ordered: u32,
     ) -> Option<bool> {
         let (ma_all, mb_all) = (&self.a.quads().metas, &self.b.quads().metas);
