@@ -15,9 +15,10 @@
 //! cache held a front before the query and after it ([`PairCache::front_len`]): a step with no
 //! front before or after did a plain query's work (its ratio should be 1), one with a front
 //! after but none before recorded one, one with a front before walked it (and kept it, or
-//! dropped it). The table prints each group's steps, summed medians and cached / plain, then the
-//! sequence's. Answers are compared with the plain query's on every step and round (a
-//! difference stops the run).
+//! dropped it). The table prints each group's steps, summed medians and cached / plain in time
+//! and in time-free work ([`frcd_obb::Counters::work`]: a group whose time ratio exceeds its
+//! work ratio spends more per unit of work), then the sequence's. Answers are compared with
+//! the plain query's on every step and round (a difference stops the run).
 //!
 //! Scenes: `dense` (the icospheres' sweep), `knots_near` (near contact, half the steps
 //! disjoint), `knots_slow` (slow coherent rotation) and the CAD pairs of `../shared/meshes` at
@@ -83,6 +84,8 @@ fn run(scene: &Scene, mode: Mode, rounds: usize) {
     let n = scene.frames.len();
     // times[variant][step] over the rounds; variant 0 plain, 1 cached.
     let mut times = vec![vec![Vec::with_capacity(rounds); n]; 2];
+    // Time-free work per step ([`frcd_obb::Counters::work`]): the same every round.
+    let mut work = vec![vec![0u64; n]; 2];
     let mut plain_answers = vec![None; n];
     let mut kinds = vec![None; n];
     for round in 0..rounds {
@@ -99,6 +102,7 @@ fn run(scene: &Scene, mode: Mode, rounds: usize) {
                     collide(&ta, &poses[0], &tb, &poses[1], &request)
                 };
                 times[cached as usize][s].push(t.elapsed().as_secs_f64() * 1e6);
+                work[cached as usize][s] = c.counters.work();
                 let answer = (c.collide, c.pairs);
                 if cached {
                     kinds[s] = Some(StepKind {
@@ -121,17 +125,28 @@ fn run(scene: &Scene, mode: Mode, rounds: usize) {
             }
         }
     }
-    let mut groups: BTreeMap<StepKind, (usize, f64, f64)> = BTreeMap::new();
+    // Per group: steps, plain and cached µs, plain and cached work.
+    let mut groups: BTreeMap<StepKind, (usize, f64, f64, u64, u64)> = BTreeMap::new();
     for s in 0..n {
         let kind = kinds[s].expect("every step ran cached");
         let g = groups.entry(kind).or_default();
         g.0 += 1;
         g.1 += median(&mut times[0][s]);
         g.2 += median(&mut times[1][s]);
+        g.3 += work[0][s];
+        g.4 += work[1][s];
     }
-    let (plain, cached) = groups
-        .values()
-        .fold((0.0, 0.0), |(p, c), g| (p + g.1, c + g.2));
+    let total = groups.values().fold((0.0, 0.0, 0, 0), |t, g| {
+        (t.0 + g.1, t.1 + g.2, t.2 + g.3, t.3 + g.4)
+    });
+    // A ratio of two sums, "-" when nothing was spent.
+    let ratio = |c: f64, p: f64| {
+        if p > 0.0 {
+            format!("{:.3}", c / p)
+        } else {
+            "-".to_string()
+        }
+    };
     println!(
         "\n{} {}, {rounds} rounds (summed per-step medians):",
         scene.name,
@@ -140,18 +155,24 @@ fn run(scene: &Scene, mode: Mode, rounds: usize) {
             Mode::AllPairs => "all pairs",
         }
     );
-    println!("| steps | what the cache did | plain µs | cached µs | cached / plain |");
-    println!("|---:|---|---:|---:|---:|");
-    for (kind, (count, p, c)) in &groups {
+    println!(
+        "| steps | what the cache did | plain µs | cached µs | time, cached / plain | work, cached / plain |"
+    );
+    println!("|---:|---|---:|---:|---:|---:|");
+    for (kind, &(count, p, c, wp, wc)) in &groups {
         println!(
-            "| {count} | {} | {p:.0} | {c:.0} | {:.3} |",
+            "| {count} | {} | {p:.0} | {c:.0} | {} | {} |",
             kind.label(),
-            c / p
+            ratio(c, p),
+            ratio(wc as f64, wp as f64)
         );
     }
     println!(
-        "| {n} | whole sequence | {plain:.0} | {cached:.0} | **{:.3}** |",
-        cached / plain
+        "| {n} | whole sequence | {:.0} | {:.0} | **{}** | {} |",
+        total.0,
+        total.1,
+        ratio(total.1, total.0),
+        ratio(total.3 as f64, total.2 as f64)
     );
 }
 
