@@ -411,7 +411,7 @@ pub fn collide_cached(
     // A front only pays when the bodies moved by a small part of their size since the last
     // query: after larger motion (random poses, teleports) every margin has expired, so the
     // cache neither walks nor records a front.
-    let coherent = cache.delta <= 0.1 * a.sphere.radius.min(b.sphere.radius);
+    let coherent = cache.coherent(a, b);
     let mut searched_all = false;
     if first && coherent {
         if let Some((la, lb)) = cache.witness_leaves {

@@ -173,18 +173,34 @@ impl PairCache {
             self.key = key;
         }
         if let Some(p) = self.prev {
-            // A bound on |frame(v) - prev(v)| for every vertex v of B (hence every point of
-            // B's triangles, convex combinations of them), rounded up.
-            let delta = (frame.t - p.t).length() * (1.0 + 1e-15)
-                + rotation_change_bound(&p.m, &frame.m) * b.vertex_radius;
-            self.delta = delta;
-            self.clock += delta * (1.0 + 1e-9);
-            if !self.clock.is_finite() {
+            let shift = (frame.t - p.t).length() * (1.0 + 1e-15);
+            if shift > COHERENT_MOTION * a.sphere.radius.min(b.sphere.radius) {
+                // Incoherent whatever the turn: the front goes (so the clock need not count
+                // this motion) and the turn's bound is not computed: on random poses (the CAD
+                // pairs) it was most of a cached query's bookkeeping over a plain query's
+                // (`docs/performance/cpu-core.md`, seventeenth sitting).
+                self.delta = f64::INFINITY;
                 self.front.clear();
-                self.clock = 0.0;
+            } else {
+                // A bound on |frame(v) - prev(v)| for every vertex v of B (hence every point
+                // of B's triangles, convex combinations of them), rounded up.
+                let delta = shift + rotation_change_bound(&p.m, &frame.m) * b.vertex_radius;
+                self.delta = delta;
+                self.clock += delta * (1.0 + 1e-9);
+                if !self.clock.is_finite() {
+                    self.front.clear();
+                    self.clock = 0.0;
+                }
             }
         }
         self.prev = Some(*frame);
+    }
+
+    /// True when B moved by at most [`COHERENT_MOTION`] of the smaller body's bounding radius
+    /// since the last query (in A's frame): only then can a front or the old witness's
+    /// neighbourhood pay.
+    pub(super) fn coherent(&self, a: &ObbTree, b: &ObbTree) -> bool {
+        self.delta <= COHERENT_MOTION * a.sphere.radius.min(b.sphere.radius)
     }
 }
 
@@ -347,6 +363,11 @@ pub(super) fn walk_or_traverse(
         cache.front = front;
     }
 }
+
+/// The motion, as a fraction of the smaller body's bounding radius, up to which a cached query
+/// counts as coherent ([`PairCache::coherent`]): after larger motion (random poses, teleports)
+/// every margin has expired, so the cache neither walks nor records a front.
+pub(super) const COHERENT_MOTION: f64 = 0.1;
 
 /// How many levels above the old witness's leaves a coherent cached first-contact query
 /// searches before the whole trees (the subtrees hold up to `2^4` leaves each). The dense

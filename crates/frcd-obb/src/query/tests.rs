@@ -924,6 +924,7 @@ mod motion_tests {
         let mut rng = rand::rngs::StdRng::seed_from_u64(22);
         let mut cache = PairCache::new();
         let mut prev: Option<RelativeFrame> = None;
+        let (mut coherent, mut incoherent) = (0, 0);
         for k in 0..300 {
             let small = 10f64.powf(-8.0 + 8.0 * rng.random::<f64>());
             let pose_b = Pose::new(
@@ -942,15 +943,70 @@ mod motion_tests {
                     "step {k}: bound {} below {moved}",
                     cache.delta
                 );
-                assert!(
-                    cache.delta <= 4.0 * moved + 1e-15,
-                    "step {k}: bound {} far above {moved}",
-                    cache.delta
-                );
+                let shift = (frame.t - p.t).length();
+                if shift > COHERENT_MOTION * tree.sphere.radius {
+                    // Beyond coherence on the shift alone: the turn's bound is skipped.
+                    assert_eq!(cache.delta, f64::INFINITY, "step {k}");
+                    incoherent += 1;
+                } else {
+                    assert!(
+                        cache.delta <= 4.0 * moved + 1e-15,
+                        "step {k}: bound {} far above {moved}",
+                        cache.delta
+                    );
+                    coherent += 1;
+                }
             }
             prev = Some(frame);
         }
+        assert!(coherent > 200 && incoherent > 0, "{coherent} {incoherent}");
         assert!(tree.vertex_radius <= tree.radius_from_origin);
         assert!(verts.iter().all(|v| v.length() <= tree.vertex_radius));
+    }
+
+    /// A shift past the coherence limit drops the front in `bind` (whatever the turn), and the
+    /// queries around it answer as plain ones: away, back, and coherent steps after.
+    #[test]
+    fn a_jump_past_coherence_drops_the_front_and_answers_stay_plain() {
+        let mesh = shapes::torus_knot(&shapes::TorusKnotParams::default()).unwrap();
+        let tree = ObbTree::build(&mesh, &BuildOptions::default());
+        let all = Request {
+            mode: Mode::AllPairs,
+            ..Request::default()
+        };
+        let limit = COHERENT_MOTION * tree.sphere.radius;
+        let near = |x: f64| {
+            Pose::new(
+                DVec3::new(x, 0.4, 0.2),
+                DQuat::from_rotation_z(0.3 + x * 0.01),
+            )
+        };
+        // Near contact, coherent steps (a front is recorded and walked), a jump of four
+        // limits, the way back, and coherent steps again.
+        let xs = [1.0, 1.0005, 1.0005 + 4.0 * limit, 1.0005, 1.001, 1.0015];
+        let mut cache = PairCache::new();
+        let mut fronts = Vec::new();
+        for (k, &x) in xs.iter().enumerate() {
+            let pose = near(x);
+            let plain = collide(&tree, &Pose::IDENTITY, &tree, &pose, &all);
+            let cached = collide_cached(&tree, &Pose::IDENTITY, &tree, &pose, &all, &mut cache);
+            assert_eq!(
+                (cached.collide, &cached.pairs),
+                (plain.collide, &plain.pairs),
+                "step {k}"
+            );
+            fronts.push(cache.front_len());
+            if k == 2 || k == 3 {
+                assert_eq!(cache.delta, f64::INFINITY, "step {k}");
+                assert_eq!(cache.front_len(), 0, "step {k}: the front was not dropped");
+            } else if k > 0 {
+                assert!(cache.delta <= limit, "step {k}: {}", cache.delta);
+            }
+        }
+        // A front stood before the jump, and one is recorded again after it.
+        assert!(
+            fronts[1] > 0 && fronts[4..].iter().any(|&n| n > 0),
+            "{fronts:?}"
+        );
     }
 }
