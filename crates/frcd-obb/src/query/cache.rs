@@ -116,7 +116,8 @@ pub(super) fn record_pairs(front: &mut Recording<'_>, pairs: impl Iterator<Item 
 /// traversal front of the last traversal: the node pairs where it stopped, each separated pair
 /// with its separation margin. Between queries the cache bounds how far any point of B moved
 /// in A's frame (`|Δt| + ‖ΔM‖₂ · r_v`, `r_v` the largest vertex distance from B's origin,
-/// summed into a motion clock); a separated front pair
+/// summed into a motion clock; a shift of more than a tenth of the smaller body's bounding
+/// radius drops the front instead, unbounded); a separated front pair
 /// whose margin exceeds the motion since its test is still separated and is not tested again
 /// (the argument holds for the fixed separating direction, so it is exact, not a heuristic).
 /// The others are tested again and traversed below where they overlap; leaf pairs whose boxes
