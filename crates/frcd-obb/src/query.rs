@@ -381,16 +381,20 @@ pub fn collide_cached(
     cache: &mut PairCache,
 ) -> Collision {
     let mut ctx = Ctx::new(a, pose_a, b, pose_b, request.method);
-    cache.bind(a, b, &ctx.frame);
+    cache.bind_trees(a, b);
     let mut c = Collision::default();
     // Cheap rejections first: the top volume, then (first contact) the old witness pair and
     // its neighbourhood.
     if ctx.top_rejects(request.top_volume) {
+        // The motion is not bounded for a rejected query: the next one bounds it from the
+        // last frame that was (a front's margins hold against the pose at their test,
+        // whatever path led to the current one).
         cache.witness = None;
         cache.witness_leaves = None;
         c.counters = ctx.counters;
         return c;
     }
+    cache.bind(a, b, &ctx.frame);
     let first = request.mode == Mode::FirstContact;
     if first {
         ctx.ordered_steps = ordered_steps();

@@ -167,12 +167,20 @@ impl PairCache {
         self.front.len()
     }
 
-    pub(super) fn bind(&mut self, a: &ObbTree, b: &ObbTree, frame: &RelativeFrame) {
+    /// Binds the cache to trees `a` and `b`: one used with other trees resets itself.
+    pub(super) fn bind_trees(&mut self, a: &ObbTree, b: &ObbTree) {
         let key = (a.uid, b.uid);
         if key != self.key {
             self.clear();
             self.key = key;
         }
+    }
+
+    /// Binds the cache to the query's trees and frame: bounds how far B moved since the last
+    /// bound frame (`delta`, added to the clock), or drops the front after a shift past
+    /// coherence.
+    pub(super) fn bind(&mut self, a: &ObbTree, b: &ObbTree, frame: &RelativeFrame) {
+        self.bind_trees(a, b);
         if let Some(p) = self.prev {
             let shift = (frame.t - p.t).length() * (1.0 + 1e-15);
             if shift > COHERENT_MOTION * a.sphere.radius.min(b.sphere.radius) {

@@ -964,6 +964,69 @@ mod motion_tests {
         assert!(verts.iter().all(|v| v.length() <= tree.vertex_radius));
     }
 
+    /// A query the top volume rejects binds no frame: the front recorded before it survives
+    /// an excursion far away and back, is walked on the return (its margins hold against the
+    /// pose at their test, whatever path led back), and every answer equals plain.
+    #[test]
+    fn a_rejected_excursion_keeps_the_front_and_answers_stay_plain() {
+        let mesh = shapes::torus_knot(&shapes::TorusKnotParams::default()).unwrap();
+        let tree = ObbTree::build(&mesh, &BuildOptions::default());
+        let all = Request {
+            mode: Mode::AllPairs,
+            ..Request::default()
+        };
+        let r = tree.sphere.radius;
+        let pose = |x: f64| Pose::new(DVec3::new(x, 0.4, 0.2), DQuat::from_rotation_z(0.3));
+        let mut cache = PairCache::new();
+        let mut fronts = Vec::new();
+        // Apart but near (the first offset along x where the knots stop touching): a front of
+        // separated pairs with their margins.
+        let x0 = (0..400)
+            .map(|k| 1.0 + 0.01 * k as f64)
+            .find(|&x| !collide(&tree, &Pose::IDENTITY, &tree, &pose(x), &all).collide)
+            .expect("the knots part within 4 units");
+        // Back to the pose of step 1: nothing moved since the last bound frame.
+        let xs = [x0, x0 + 1e-4, x0 + 10.0 * r, x0 + 1e-4];
+        for (k, x) in xs.into_iter().enumerate() {
+            let before = cache.prev;
+            let plain = collide(&tree, &Pose::IDENTITY, &tree, &pose(x), &all);
+            let cached = collide_cached(&tree, &Pose::IDENTITY, &tree, &pose(x), &all, &mut cache);
+            assert_eq!(
+                (cached.collide, &cached.pairs),
+                (plain.collide, &plain.pairs),
+                "step {k}"
+            );
+            if k == 2 {
+                assert!(!plain.collide && plain.counters.top_tests > 0);
+                assert_eq!(
+                    cached.counters.box_tests, 0,
+                    "not rejected by the top volume"
+                );
+                let (p0, p1) = (before.unwrap(), cache.prev.unwrap());
+                assert_eq!(
+                    (p0.t, p0.m),
+                    (p1.t, p1.m),
+                    "the rejected query bound its frame"
+                );
+            }
+            if k != 2 {
+                assert!(!plain.collide && plain.counters.box_tests > 0, "step {k}");
+            }
+            if k == 3 {
+                // The front was walked: far less work than the plain traversal.
+                assert!(
+                    2 * cached.counters.work() < plain.counters.work(),
+                    "{} against {}",
+                    cached.counters.work(),
+                    plain.counters.work()
+                );
+            }
+            fronts.push(cache.front_len());
+        }
+        assert!(fronts[1] > 0, "{fronts:?}");
+        assert_eq!(fronts[2], fronts[1], "the rejected query touched the front");
+    }
+
     /// A shift past the coherence limit drops the front in `bind` (whatever the turn), and the
     /// queries around it answer as plain ones: away, back, and coherent steps after.
     #[test]
