@@ -240,8 +240,8 @@ impl ObbTree {
     /// blocks (with the per-node quad entries and metas, about 92 B per triangle at leaf 2,
     /// built by the first collision query), so a traversal step loads its lanes instead of
     /// gathering four nodes. Without it mesh + tree take about 108-117 B per triangle, plus
-    /// about 15 for the per-node quad entries and metas once queried, and the box work is slower (the crate README gives the
-    /// measured cost); answers are the same either way.
+    /// about 15 for the per-node quad entries and metas once queried, and the box work is
+    /// slower (the crate README gives the measured cost); answers are the same either way.
     ///
     /// ```
     /// use frcd_obb::{BuildOptions, ObbTree};

@@ -183,7 +183,7 @@ impl PairCache {
         self.bind_trees(a, b);
         if let Some(p) = self.prev {
             let shift = (frame.t - p.t).length() * (1.0 + 1e-15);
-            if shift > COHERENT_MOTION * a.sphere.radius.min(b.sphere.radius) {
+            if shift > coherence_limit(a, b) {
                 // Incoherent whatever the turn: the front goes (so the clock need not count
                 // this motion) and the turn's bound is not computed: on random poses (the CAD
                 // pairs) it was most of a cached query's bookkeeping over a plain query's
@@ -205,11 +205,10 @@ impl PairCache {
         self.prev = Some(*frame);
     }
 
-    /// True when B moved by at most [`COHERENT_MOTION`] of the smaller body's bounding radius
-    /// since the last query (in A's frame): only then can a front or the old witness's
-    /// neighbourhood pay.
+    /// True when B moved by at most [`coherence_limit`] since the last bound frame (in A's
+    /// frame): only then can a front or the old witness's neighbourhood pay.
     pub(super) fn coherent(&self, a: &ObbTree, b: &ObbTree) -> bool {
-        self.delta <= COHERENT_MOTION * a.sphere.radius.min(b.sphere.radius)
+        self.delta <= coherence_limit(a, b)
     }
 }
 
@@ -377,6 +376,12 @@ pub(super) fn walk_or_traverse(
 /// counts as coherent ([`PairCache::coherent`]): after larger motion (random poses, teleports)
 /// every margin has expired, so the cache neither walks nor records a front.
 pub(super) const COHERENT_MOTION: f64 = 0.1;
+
+/// The largest motion of B in A's frame that counts as coherent for trees `a` and `b`:
+/// [`COHERENT_MOTION`] of the smaller body's bounding radius.
+pub(super) fn coherence_limit(a: &ObbTree, b: &ObbTree) -> f64 {
+    COHERENT_MOTION * a.sphere.radius.min(b.sphere.radius)
+}
 
 /// How many levels above the old witness's leaves a coherent cached first-contact query
 /// searches before the whole trees (the subtrees hold up to `2^4` leaves each). The dense
