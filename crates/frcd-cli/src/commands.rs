@@ -556,10 +556,10 @@ pub fn check(run: &CheckRun) -> Result<()> {
             }
         }
     }
-    if !run.quiet {
-        if let Some(c) = &clearance {
-            c.print(&report);
-        }
+    if !run.quiet
+        && let Some(c) = &clearance
+    {
+        c.print(&report);
     }
     if let (Some(c), Some(path)) = (&clearance, &run.clearance.plot) {
         let n = c.plot(path, &report, &run.clearance)?;

@@ -209,14 +209,14 @@ impl CostModel {
             ("threads", Some(self.threads as f64)),
         ];
         for (field, v) in fields {
-            if let Some(value) = v {
-                if !value.is_finite() || value < 0.0 {
-                    return Err(CostModelError::Invalid {
-                        path: path.to_string(),
-                        field,
-                        value,
-                    });
-                }
+            if let Some(value) = v
+                && (!value.is_finite() || value < 0.0)
+            {
+                return Err(CostModelError::Invalid {
+                    path: path.to_string(),
+                    field,
+                    value,
+                });
             }
         }
         Ok(())

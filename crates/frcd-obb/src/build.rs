@@ -281,12 +281,12 @@ fn node_fit(
     fit: FitMethod,
     leaf: usize,
 ) -> (Option<DMat3>, Option<[f64; 6]>) {
-    if let [a, b] = items {
-        if leaf >= 2 && fit == FitMethod::VertexCovariance {
-            if let Some(axes) = pair_frame(a, b) {
-                return (Some(axes), None);
-            }
-        }
+    if let [a, b] = items
+        && leaf >= 2
+        && fit == FitMethod::VertexCovariance
+        && let Some(axes) = pair_frame(a, b)
+    {
+        return (Some(axes), None);
     }
     moments.fit(items, fit)
 }
@@ -295,10 +295,10 @@ fn node_fit(
 /// fit rule (for the vertex covariance, from the moments the parent summed, or for two
 /// triangles their plane's frame, see [`node_fit`]).
 fn leaf_obb(items: &[Item], axes: Option<DMat3>, fit: FitMethod) -> Obb {
-    if let [t] = items {
-        if let Some(frame) = triangle_frame(&t.triangle()) {
-            return leaf_box(items, frame);
-        }
+    if let [t] = items
+        && let Some(frame) = triangle_frame(&t.triangle())
+    {
+        return leaf_box(items, frame);
     }
     match axes {
         Some(axes) => leaf_box(items, axes),

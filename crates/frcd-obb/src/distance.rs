@@ -240,19 +240,20 @@ fn run_distance(
         pa: DVec3::NAN,
         pb: DVec3::NAN,
     };
-    if let Some((ta, tb)) = seed {
-        if (ta as usize) < a.triangles().len() && (tb as usize) < b.triangles().len() {
-            q.counters.tri_tests += 1;
-            let (d, pa, pb) = triangle_distance(&a.triangle(ta).v, &q.b_triangle(tb), q.tri_tol);
-            if d < best.d {
-                best = Best {
-                    d,
-                    pair: (ta, tb),
-                    pa,
-                    pb,
-                };
-                q.set_dir(pa, pb, d);
-            }
+    if let Some((ta, tb)) = seed
+        && (ta as usize) < a.triangles().len()
+        && (tb as usize) < b.triangles().len()
+    {
+        q.counters.tri_tests += 1;
+        let (d, pa, pb) = triangle_distance(&a.triangle(ta).v, &q.b_triangle(tb), q.tri_tol);
+        if d < best.d {
+            best = Best {
+                d,
+                pair: (ta, tb),
+                pa,
+                pb,
+            };
+            q.set_dir(pa, pb, d);
         }
     }
     q.rel = rel;
@@ -501,33 +502,33 @@ impl<'a> Query<'a> {
         placed: &mut Option<rss::Placed>,
         enough: f64,
     ) -> f64 {
-        if let Some(n) = self.dir {
-            if placed.is_none() {
-                self.counters.box_tests += 1;
-                let va = &self.va[na as usize].rss;
-                let vb = &self.vb[nb as usize].rss;
-                let (db, dt) = (self.dir_b, self.dir_t);
-                let cb = db.dot(vb.c) + dt;
-                let eb = vb.a * db.dot(vb.u).abs() + vb.b * db.dot(vb.v).abs();
-                let g = (cb - n.dot(va.c)).abs()
-                    - va.a * n.dot(va.u).abs()
-                    - va.b * n.dot(va.v).abs()
-                    - eb
-                    - va.r
-                    - vb.r
-                    - self.slack;
-                if g >= enough {
-                    return g;
-                }
-                let pb = *placed.insert(self.place(nb));
-                let r = rss::lower_bound(
-                    &self.va[na as usize].rss,
-                    &pb,
-                    self.refine,
-                    enough + self.slack,
-                );
-                return g.max(r - self.slack);
+        if let Some(n) = self.dir
+            && placed.is_none()
+        {
+            self.counters.box_tests += 1;
+            let va = &self.va[na as usize].rss;
+            let vb = &self.vb[nb as usize].rss;
+            let (db, dt) = (self.dir_b, self.dir_t);
+            let cb = db.dot(vb.c) + dt;
+            let eb = vb.a * db.dot(vb.u).abs() + vb.b * db.dot(vb.v).abs();
+            let g = (cb - n.dot(va.c)).abs()
+                - va.a * n.dot(va.u).abs()
+                - va.b * n.dot(va.v).abs()
+                - eb
+                - va.r
+                - vb.r
+                - self.slack;
+            if g >= enough {
+                return g;
             }
+            let pb = *placed.insert(self.place(nb));
+            let r = rss::lower_bound(
+                &self.va[na as usize].rss,
+                &pb,
+                self.refine,
+                enough + self.slack,
+            );
+            return g.max(r - self.slack);
         }
         let pb = *placed.get_or_insert_with(|| self.place(nb));
         self.lower_bound(na, &pb, enough)

@@ -153,10 +153,10 @@ pub(crate) fn support_below(
     stack: &mut Vec<u32>,
     found: &mut Option<(DVec3, u32)>,
 ) -> bool {
-    if let Some((p, _)) = *found {
-        if past(n.dot(p), limit) {
-            return false;
-        }
+    if let Some((p, _)) = *found
+        && past(n.dot(p), limit)
+    {
+        return false;
     }
     let ub = |id: u32| {
         let v = &nodes[id as usize].rss;

@@ -99,19 +99,19 @@ pub(crate) fn triangle_features(a: &[DVec3; 3], b: &[DVec3; 3]) -> (f64, DVec3, 
     let na = (a[1] - a[0]).cross(a[2] - a[0]);
     let nna = na.length_squared();
     for &p in b {
-        if let Some((d2, foot)) = point_face(p, a, na, nna) {
-            if d2 < best.0 {
-                best = (d2, foot, p);
-            }
+        if let Some((d2, foot)) = point_face(p, a, na, nna)
+            && d2 < best.0
+        {
+            best = (d2, foot, p);
         }
     }
     let nb = (b[1] - b[0]).cross(b[2] - b[0]);
     let nnb = nb.length_squared();
     for &p in a {
-        if let Some((d2, foot)) = point_face(p, b, nb, nnb) {
-            if d2 < best.0 {
-                best = (d2, p, foot);
-            }
+        if let Some((d2, foot)) = point_face(p, b, nb, nnb)
+            && d2 < best.0
+        {
+            best = (d2, p, foot);
         }
     }
     best
@@ -141,24 +141,24 @@ pub(crate) fn triangle_features_early(
     let na = (a[1] - a[0]).cross(a[2] - a[0]);
     let nna = na.length_squared();
     for &p in b {
-        if let Some((d2, foot)) = point_face(p, a, na, nna) {
-            if d2 < best.0 {
-                best = (d2, foot, p);
-                if d2 == 0.0 || separated(foot, p) {
-                    return best;
-                }
+        if let Some((d2, foot)) = point_face(p, a, na, nna)
+            && d2 < best.0
+        {
+            best = (d2, foot, p);
+            if d2 == 0.0 || separated(foot, p) {
+                return best;
             }
         }
     }
     let nb = (b[1] - b[0]).cross(b[2] - b[0]);
     let nnb = nb.length_squared();
     for &p in a {
-        if let Some((d2, foot)) = point_face(p, b, nb, nnb) {
-            if d2 < best.0 {
-                best = (d2, p, foot);
-                if d2 == 0.0 || separated(p, foot) {
-                    return best;
-                }
+        if let Some((d2, foot)) = point_face(p, b, nb, nnb)
+            && d2 < best.0
+        {
+            best = (d2, p, foot);
+            if d2 == 0.0 || separated(p, foot) {
+                return best;
             }
         }
     }

@@ -403,13 +403,12 @@ pub fn collide_cached(
     // the witness's job: a front recorded there holds the whole cut below the first hit and
     // costs more to record and walk than a fresh wide traversal that stops at the first hit.
     let was_touching = first && cache.witness.is_some();
-    if first {
-        if let Some((x, y)) = cache.witness {
-            if ctx.tri_pair(x, y) {
-                c.witness = Some((x, y));
-                return finish(&ctx, request, c);
-            }
-        }
+    if first
+        && let Some((x, y)) = cache.witness
+        && ctx.tri_pair(x, y)
+    {
+        c.witness = Some((x, y));
+        return finish(&ctx, request, c);
     }
     let mut found = None;
     // A front only pays when the bodies moved by a small part of their size since the last
@@ -417,18 +416,19 @@ pub fn collide_cached(
     // cache neither walks nor records a front.
     let coherent = cache.coherent(a, b);
     let mut searched_all = false;
-    if first && coherent {
-        if let Some((la, lb)) = cache.witness_leaves {
-            // Where the bodies touched a moment ago they most likely touch now: the subtrees a
-            // few levels above the old witness's leaves first, the whole trees only if they
-            // hold no touching pair (their pairs are then tested again: a capped loss). In
-            // trees shallower than that the neighbourhood is the whole trees.
-            let na = ancestor(&a.nodes, la, NEIGHBOURHOOD_LEVELS);
-            let nb = ancestor(&b.nodes, lb, NEIGHBOURHOOD_LEVELS);
-            let mut stack = PooledStack::take();
-            ctx.descend(na, nb, &mut stack, None, &mut FirstHit(&mut found));
-            searched_all = (na, nb) == (0, 0);
-        }
+    if first
+        && coherent
+        && let Some((la, lb)) = cache.witness_leaves
+    {
+        // Where the bodies touched a moment ago they most likely touch now: the subtrees a
+        // few levels above the old witness's leaves first, the whole trees only if they
+        // hold no touching pair (their pairs are then tested again: a capped loss). In
+        // trees shallower than that the neighbourhood is the whole trees.
+        let na = ancestor(&a.nodes, la, NEIGHBOURHOOD_LEVELS);
+        let nb = ancestor(&b.nodes, lb, NEIGHBOURHOOD_LEVELS);
+        let mut stack = PooledStack::take();
+        ctx.descend(na, nb, &mut stack, None, &mut FirstHit(&mut found));
+        searched_all = (na, nb) == (0, 0);
     }
     if found.is_none() && !searched_all {
         if first {

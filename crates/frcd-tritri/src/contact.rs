@@ -188,10 +188,10 @@ fn touch_point_coplanar(ta: &[DVec3; 3], tb: &[DVec3; 3]) -> DVec3 {
         for j in 0..3 {
             let (p, q) = (ta[i], ta[(i + 1) % 3]);
             let (r, s) = (tb[j], tb[(j + 1) % 3]);
-            if exact::general(&[p, q, q], &[r, s, s]) {
-                if let Contact::Point(x) = seg_seg(p, q, r, s) {
-                    return x;
-                }
+            if exact::general(&[p, q, q], &[r, s, s])
+                && let Contact::Point(x) = seg_seg(p, q, r, s)
+            {
+                return x;
             }
         }
     }

@@ -5,6 +5,7 @@
 use super::RelativeFrame;
 use super::hits::{Hits, Restart};
 use super::traverse::{Ctx, PooledStack};
+use crate::isa::Isa;
 use crate::nodes::TNode;
 use crate::tree::ObbTree;
 use crate::wide::{self, ALanes};
@@ -460,11 +461,16 @@ pub(super) fn walk_front(
     hit: &mut impl Hits,
 ) -> (bool, u64) {
     #[cfg(target_arch = "x86_64")]
-    if ctx.avx2 {
-        // SAFETY: `avx2` is true only where the running CPU reports AVX2 (`Ctx::new`,
-        // `isa::has_avx2`), the one feature `walk_front_avx2` is compiled with.
+    match ctx.isa {
+        // SAFETY: `isa` names only a build whose features the running CPU reports
+        // (`Ctx::new`, `isa::best`).
         #[allow(unsafe_code)]
-        return unsafe { walk_front_avx2(ctx, front, scratch, clock, budget, hit) };
+        Isa::Avx512 => {
+            return unsafe { walk_front_avx512(ctx, front, scratch, clock, budget, hit) };
+        }
+        #[allow(unsafe_code)]
+        Isa::Avx2 => return unsafe { walk_front_avx2(ctx, front, scratch, clock, budget, hit) },
+        Isa::Baseline => {}
     }
     walk_front_body(ctx, front, scratch, clock, budget, hit)
 }
@@ -473,6 +479,20 @@ pub(super) fn walk_front(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 pub(super) fn walk_front_avx2(
+    ctx: &mut Ctx<'_>,
+    front: &mut Front,
+    scratch: &mut Front,
+    clock: f64,
+    budget: u64,
+    hit: &mut impl Hits,
+) -> (bool, u64) {
+    walk_front_body(ctx, front, scratch, clock, budget, hit)
+}
+
+/// [`walk_front`] compiled with AVX-512 F and VL (`isa.rs`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512vl")]
+pub(super) fn walk_front_avx512(
     ctx: &mut Ctx<'_>,
     front: &mut Front,
     scratch: &mut Front,

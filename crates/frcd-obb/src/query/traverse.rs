@@ -5,7 +5,7 @@
 use super::cache::{Recording, record_pairs, record_separated};
 use super::hits::Hits;
 use super::{Containment, Counters, RelativeFrame, TopVolume, contained, query_slack};
-use crate::isa;
+use crate::isa::{self, Isa};
 use crate::nodes::TNode;
 use crate::sat::{self, Placed};
 use crate::tree::ObbTree;
@@ -352,8 +352,13 @@ impl Drop for PooledStack {
 /// Which traversal a query runs (crate-internal switch, for tests comparing the two).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Traversal {
-    /// The wide f32 traversal when the query's magnitudes fit f32 (`wide.rs`), else the f64 one.
+    /// The wide f32 traversal when the query's magnitudes fit f32 (`wide.rs`), else the f64 one;
+    /// the process's build of its hot loop ([`isa::best`]).
     Wide,
+    /// The wide traversal's AVX2 build even where the process runs the AVX-512 one (tests
+    /// comparing the builds, `isa.rs`).
+    #[cfg_attr(not(test), allow(dead_code))]
+    WideAvx2,
     /// The wide traversal compiled for the baseline instruction set even where the CPU has
     /// AVX2 (tests comparing the two builds of the hot loop, `isa.rs`).
     #[cfg_attr(not(test), allow(dead_code))]
@@ -387,10 +392,10 @@ pub(super) struct Ctx<'a> {
     /// The f32 box test of the wide traversal, `None` where the query's magnitudes do not fit
     /// f32 (then the binary f64 traversal runs).
     pub(super) sat32: Option<Sat32>,
-    /// Run the wide traversal's AVX2 build (`isa.rs`): the CPU has AVX2 and no test asked for
-    /// the baseline build (always false, and unread, off x86-64).
+    /// The build of the wide traversal's hot loop this query runs (`isa.rs`): one the CPU has
+    /// (always the baseline, and unread, off x86-64).
     #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-    pub(super) avx2: bool,
+    pub(super) isa: Isa,
     /// How many steps at the top of each wide descent expand their overlapping lanes deepest
     /// first ([`ORDERED_STEPS`] in first contact, 0 in all pairs, where order is moot).
     pub(super) ordered_steps: u32,
@@ -448,13 +453,18 @@ impl<'a> Ctx<'a> {
         let slack = query_slack(a, b, &frame);
         let traversal = TRAVERSAL.with(|c| c.get());
         let sat32 = match traversal {
-            Traversal::Wide | Traversal::WideBaseline => {
+            Traversal::Wide | Traversal::WideAvx2 | Traversal::WideBaseline => {
                 let mag = a.radius_from_origin + b.radius_from_origin + frame.t.length();
                 Sat32::new(frame.m, frame.t, slack, mag)
             }
             Traversal::Binary => None,
         };
-        let avx2 = traversal == Traversal::Wide && isa::has_avx2();
+        let isa = match (traversal, isa::best()) {
+            (Traversal::Wide, best) => best,
+            (Traversal::WideAvx2, Isa::Avx512) => Isa::Avx2,
+            (Traversal::WideAvx2, best) => best,
+            (Traversal::WideBaseline | Traversal::Binary, _) => Isa::Baseline,
+        };
         Ctx {
             a,
             b,
@@ -463,7 +473,7 @@ impl<'a> Ctx<'a> {
             method,
             counters: Counters::default(),
             sat32,
-            avx2,
+            isa,
             ordered_steps: 0,
             last_leaves: (0, 0),
         }
@@ -757,13 +767,22 @@ impl<'a> Ctx<'a> {
         hit: &mut impl Hits,
     ) -> bool {
         #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: `avx2` is true only where the running CPU reports AVX2 (`Ctx::new`,
-            // `isa::has_avx2`), the one feature `descend_wide_avx2` is compiled with.
+        match self.isa {
+            // SAFETY: `isa` names only a build whose features the running CPU reports
+            // (`Ctx::new`, `isa::best`): AVX2, or AVX2 with AVX-512 F and VL.
             #[allow(unsafe_code)]
-            return unsafe {
-                self.descend_wide_avx2(sat, i, j, overlapping_start, stack, front, hit)
-            };
+            Isa::Avx512 => {
+                return unsafe {
+                    self.descend_wide_avx512(sat, i, j, overlapping_start, stack, front, hit)
+                };
+            }
+            #[allow(unsafe_code)]
+            Isa::Avx2 => {
+                return unsafe {
+                    self.descend_wide_avx2(sat, i, j, overlapping_start, stack, front, hit)
+                };
+            }
+            Isa::Baseline => {}
         }
         self.descend_wide_body::<false>(sat, i, j, overlapping_start, stack, front, hit)
     }
@@ -786,8 +805,27 @@ impl<'a> Ctx<'a> {
         self.descend_wide_body::<true>(sat, i, j, overlapping_start, stack, front, hit)
     }
 
+    /// [`Ctx::descend_wide`] compiled with AVX-512 F and VL (`isa.rs`): the AVX2 build's code,
+    /// EVEX-encoded with 32 vector registers, so the eight-lane test keeps its values in
+    /// registers.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,avx512f,avx512vl")]
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn descend_wide_avx512(
+        &mut self,
+        sat: &Sat32,
+        i: u32,
+        j: u32,
+        overlapping_start: Option<BLanes>,
+        stack: &mut Stack,
+        front: Recording<'_>,
+        hit: &mut impl Hits,
+    ) -> bool {
+        self.descend_wide_body::<true>(sat, i, j, overlapping_start, stack, front, hit)
+    }
+
     /// The body of [`Ctx::descend_wide`], inlined into each of its instruction-set builds
-    /// (`AVX`: the AVX2 build, which runs paired steps as eight-lane tests).
+    /// (`AVX`: the AVX2 and AVX-512 builds, which run paired steps as eight-lane tests).
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     pub(super) fn descend_wide_body<const AVX: bool>(
@@ -824,11 +862,11 @@ impl<'a> Ctx<'a> {
         // block above its own is finished with.
         stack.placed32.push(start);
         stack.pairs.push((i, j, (pbase as u32) << 2));
-        if self.ordered_steps > 0 && front.is_none() {
-            if let Some(stop) = self.ordered_loop(sat, base, pbase, stack, hit, self.ordered_steps)
-            {
-                return stop;
-            }
+        if self.ordered_steps > 0
+            && front.is_none()
+            && let Some(stop) = self.ordered_loop(sat, base, pbase, stack, hit, self.ordered_steps)
+        {
+            return stop;
         }
         // One instance per case, so that the plain loop carries no front checks.
         if front.is_none() {
@@ -1025,8 +1063,8 @@ impl<'a> Ctx<'a> {
         let s = sat.s();
         #[cfg(target_arch = "x86_64")]
         if AVX {
-            // SAFETY: `AVX` is true only in the traversal's AVX2 build, entered only where the
-            // CPU reports AVX2 (`Ctx::new`, `isa::has_avx2`).
+            // SAFETY: `AVX` is true only in the traversal's AVX2 and AVX-512 builds, entered
+            // only where the CPU reports their features (`Ctx::new`, `isa::best`).
             #[allow(unsafe_code)]
             unsafe {
                 let (first, h1) = self.step_half(sat, stack, entry1.0, entry1.1);
