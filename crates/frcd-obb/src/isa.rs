@@ -31,7 +31,11 @@
 //!
 //! `FRCD_OBB_ISA` in the environment (read once per process) overrides the choice:
 //! `baseline`, `avx2`, or `avx512` (taken only where the CPU has AVX-512 F and VL, on any
-//! vendor), to measure one build against another with the same binary.
+//! vendor), to measure one build against another with the same binary;
+//! [`set_wide_traversal_isa`] does the same from code, for benchmarks that alternate the
+//! builds in one process (`benches/benches/isa_builds.rs`).
+
+use std::sync::atomic::{AtomicU8, Ordering};
 
 /// One build of the wide traversal's hot loop.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -75,14 +79,58 @@ pub(crate) fn has_avx2() -> bool {
     best() != Isa::Baseline
 }
 
-/// The build this process's queries run (detected once, then a load).
+/// The build this process's queries run: detected on first use, then one relaxed load.
 #[inline]
 pub(crate) fn best() -> Isa {
-    static BEST: std::sync::OnceLock<Isa> = std::sync::OnceLock::new();
-    *BEST.get_or_init(|| {
-        let forced = std::env::var("FRCD_OBB_ISA").ok();
-        choose(detect(), forced.as_deref())
-    })
+    match CHOSEN.load(Ordering::Relaxed) {
+        1 => Isa::Baseline,
+        2 => Isa::Avx2,
+        3 => Isa::Avx512,
+        _ => {
+            let forced = std::env::var("FRCD_OBB_ISA").ok();
+            let isa = choose(detect(), forced.as_deref());
+            // A concurrent `set_wide_traversal_isa` wins: store only over "not yet chosen".
+            let _ = CHOSEN.compare_exchange(0, code(isa), Ordering::Relaxed, Ordering::Relaxed);
+            decode(CHOSEN.load(Ordering::Relaxed)).unwrap_or(isa)
+        }
+    }
+}
+
+/// The process's build: 0 not yet chosen, else [`code`] of it.
+static CHOSEN: AtomicU8 = AtomicU8::new(0);
+
+fn code(isa: Isa) -> u8 {
+    match isa {
+        Isa::Baseline => 1,
+        Isa::Avx2 => 2,
+        Isa::Avx512 => 3,
+    }
+}
+
+fn decode(c: u8) -> Option<Isa> {
+    match c {
+        1 => Some(Isa::Baseline),
+        2 => Some(Isa::Avx2),
+        3 => Some(Isa::Avx512),
+        _ => None,
+    }
+}
+
+/// Makes the queries this process starts from now on run the wide traversal's build `name`
+/// (`"baseline"`, `"avx2"` or `"avx512"`, as `FRCD_OBB_ISA` takes them) where the CPU has it,
+/// else the build the CPU would get by default; returns the build now in force. For
+/// benchmarks that compare the builds in one process: every build gives the same answers bit
+/// for bit, so nothing but speed depends on it. A query already running keeps its build.
+///
+/// ```
+/// let now = frcd_obb::set_wide_traversal_isa("baseline");
+/// assert_eq!(now, "baseline");
+/// assert_eq!(frcd_obb::wide_traversal_isa(), "baseline");
+/// ```
+pub fn set_wide_traversal_isa(name: &str) -> &'static str {
+    let isa = choose(detect(), Some(name));
+    CHOSEN.store(code(isa), Ordering::Relaxed);
+    isa.name()
 }
 
 /// What the running CPU offers: (AVX2, AVX-512 F and VL, made by AMD).

@@ -49,7 +49,7 @@ mod world;
 pub use checked::{PairSide, QueryError, try_collide, try_collide_cached};
 pub use frcd_geom::fit::FitMethod;
 pub use frcd_tritri::{Contact, Method};
-pub use isa::wide_traversal_isa;
+pub use isa::{set_wide_traversal_isa, wide_traversal_isa};
 pub use query::{
     Collision, Containment, Counters, Mode, PairCache, RelativeFrame, Request, TopVolume, collide,
     collide_cached, containment,
