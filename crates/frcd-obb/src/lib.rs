@@ -1,7 +1,8 @@
 #![doc = include_str!("../README.md")]
-// The crate's unsafe code: the calls into the AVX2 builds (traversal, front walk, the build's
-// passes), entered only after the CPU was checked for AVX2 (`isa.rs`), and the AVX2
-// intrinsics of the traversal's eight-lane test (`wide::avx`), which only that build runs.
+// The crate's unsafe code: the calls into the AVX2 and AVX-512 builds (traversal, front walk,
+// the build's passes), entered only after the CPU was checked for their features (`isa.rs`),
+// the AVX2 intrinsics of the traversal's eight-lane test (`wide::avx`), which only those
+// builds run, and the `cpuid` that reads the CPU's vendor (`isa::amd`).
 #![deny(unsafe_code)]
 //! ## API overview
 //!
