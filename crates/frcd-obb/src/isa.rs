@@ -19,11 +19,13 @@
 //!
 //! **A third build, with AVX-512 VL, on AMD CPUs that have it (Zen 4 and later).** The same
 //! 256-bit AVX2 code compiled with `avx512f,avx512vl` is EVEX-encoded and gets 32 vector
-//! registers instead of 16, so the eight-lane test (about 33 live lane values) no longer
-//! spills. Measured in one process, the two builds alternated over 15 rounds on a Zen 4 EPYC
-//! (2026-12-01, `docs/performance/cpu-core.md`, eighteenth sitting): the near-contact knots
-//! 0.887× (first contact) and 0.942× (all pairs) the AVX2 build's time, the slow knots 0.92-0.94×,
-//! the dense sweep's all pairs 0.97×, the CAD pairs 0.96-1.05× (within the host's noise). On
+//! registers instead of 16, so the eight-lane test (about 33 live lane values) spills about
+//! half as often (ymm operands on the stack in the traversal function: 1,238 → 629).
+//! Measured in one process, the two builds alternated over 25 rounds on a Zen 4 EPYC
+//! (2026-12-01, `benches/benches/isa_builds.rs`; `docs/performance/cpu-core.md`, eighteenth
+//! sitting): the near-contact knots 0.898× (first contact) and 0.970× (all pairs) the AVX2
+//! build's time (0.887× / 0.942× in an earlier 15-round session), the slow knots 0.90-0.93×,
+//! the dense sweep's all pairs 0.95×, the CAD pairs 0.94-1.00× (within the host's noise). On
 //! an Intel Xeon (Emerald Rapids) the same build was about 15 % *slower* (sixteenth sitting),
 //! so Intel CPUs keep the AVX2 build. Rust never contracts into FMA here either (the `fma`
 //! feature that `avx512f` implies only makes the instructions available), so all three builds
