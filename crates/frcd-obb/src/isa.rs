@@ -84,18 +84,14 @@ pub(crate) fn has_avx2() -> bool {
 /// The build this process's queries run: detected on first use, then one relaxed load.
 #[inline]
 pub(crate) fn best() -> Isa {
-    match CHOSEN.load(Ordering::Relaxed) {
-        1 => Isa::Baseline,
-        2 => Isa::Avx2,
-        3 => Isa::Avx512,
-        _ => {
-            let forced = std::env::var("FRCD_OBB_ISA").ok();
-            let isa = choose(detect(), forced.as_deref());
-            // A concurrent `set_wide_traversal_isa` wins: store only over "not yet chosen".
-            let _ = CHOSEN.compare_exchange(0, code(isa), Ordering::Relaxed, Ordering::Relaxed);
-            decode(CHOSEN.load(Ordering::Relaxed)).unwrap_or(isa)
-        }
+    if let Some(isa) = decode(CHOSEN.load(Ordering::Relaxed)) {
+        return isa;
     }
+    let forced = std::env::var("FRCD_OBB_ISA").ok();
+    let isa = choose(detect(), forced.as_deref());
+    // A concurrent `set_wide_traversal_isa` wins: store only over "not yet chosen".
+    let _ = CHOSEN.compare_exchange(0, code(isa), Ordering::Relaxed, Ordering::Relaxed);
+    decode(CHOSEN.load(Ordering::Relaxed)).unwrap_or(isa)
 }
 
 /// The process's build: 0 not yet chosen, else [`code`] of it.
