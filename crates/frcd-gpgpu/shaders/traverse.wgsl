@@ -82,6 +82,14 @@ override EXACT_PATH: bool = true;
 @group(1) @binding(6) var<storage, read_write> args_next: array<atomic<u32>, 4>;
 @group(1) @binding(7) var<storage, read_write> args_after: array<u32, 4>;
 @group(1) @binding(8) var<uniform> level: Level;
+// Both passes: each pair's f32 pose and arena bases as four rgba32uint texels, pair p at texels
+// 4 (p mod 512) + k of row p / 512: (R row 0, t.x) (R row 1, t.y) (R row 2, t.z) as f32 bits,
+// then `PairInfo.base`. The same words as `pairs[p]` (r0-r2, t, base); read as texels because a
+// software driver such as llvmpipe fetches a texel for its whole vector of invocations at once,
+// where a storage-buffer load of an index that varies across lanes becomes a loop over the
+// lanes with a bounds check per word (measured 2026-12-01: those loops were a fifth of the
+// traversal's time there).
+@group(1) @binding(9) var poses: texture_2d<u32>;
 
 // The pair this invocation works on.
 var<private> pose: PairInfo;
@@ -129,6 +137,22 @@ fn load_node(i: u32) -> Node {
     n.first = u32(t4.y);
     n.count = u32(t4.z);
     return n;
+}
+
+// Fills `pose`'s f32 pose and bases for pair p from `poses` (the exact path's words are read
+// from `pairs` by the triangle pass). A bit cast is exact; a subnormal word a driver flushes
+// when it computes with it is inside the TAU terms of every bound.
+fn load_pose(p: u32) {
+    let col = (p & 511u) * 4u;
+    let row = p >> 9u;
+    let w0 = textureLoad(poses, vec2<u32>(col, row), 0);
+    let w1 = textureLoad(poses, vec2<u32>(col + 1u, row), 0);
+    let w2 = textureLoad(poses, vec2<u32>(col + 2u, row), 0);
+    pose.r0 = vec4<f32>(bitcast<vec3<f32>>(w0.xyz), 0.0);
+    pose.r1 = vec4<f32>(bitcast<vec3<f32>>(w1.xyz), 0.0);
+    pose.r2 = vec4<f32>(bitcast<vec3<f32>>(w2.xyz), 0.0);
+    pose.t = vec4<f32>(bitcast<f32>(w0.w), bitcast<f32>(w1.w), bitcast<f32>(w2.w), 0.0);
+    pose.base = textureLoad(poses, vec2<u32>(col + 3u, row), 0);
 }
 
 fn rot(v: vec3<f32>) -> vec3<f32> {
@@ -582,12 +606,9 @@ fn triangles(@builtin(workgroup_id) wid: vec3<u32>,
         return;
     }
     let entry = frontier_in[idx];
-    // Field by field; the exact path's limbs are read by `exact_w`.
-    pose.r0 = pairs[entry.x].r0;
-    pose.r1 = pairs[entry.x].r1;
-    pose.r2 = pairs[entry.x].r2;
-    pose.t = pairs[entry.x].t;
-    pose.base = pairs[entry.x].base;
+    // The pose from its texels; the exact path's words from the pair table (its limbs are read
+    // by `exact_w`).
+    load_pose(entry.x);
     pose.fix = pairs[entry.x].fix;
     let lay = arena.tri_layout;
     let sa = slot(lay, 3u, pose.base.y + entry.y);
@@ -637,11 +658,7 @@ fn traverse(@builtin(workgroup_id) wid: vec3<u32>,
     }
     let entry = frontier_in[idx];
     // Only the f32 pose and the bases (the exact path's words are the triangle pass's).
-    pose.r0 = pairs[entry.x].r0;
-    pose.r1 = pairs[entry.x].r1;
-    pose.r2 = pairs[entry.x].r2;
-    pose.t = pairs[entry.x].t;
-    pose.base = pairs[entry.x].base;
+    load_pose(entry.x);
     // Node indices in the frontier are relative to each mesh's first node.
     let pair = entry.yz;
     let na = load_node(pose.base.x + pair.x);

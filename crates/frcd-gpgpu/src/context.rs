@@ -21,8 +21,8 @@ pub fn requirements() -> wgpu::Limits {
         // traverse.wgsl: frontier in/out (triangle list and output in the triangle pass),
         // state, triangle list, pair table, the next two levels' indirect arguments.
         max_storage_buffers_per_shader_stage: 7,
-        // The arena: nodes, triangles.
-        max_sampled_textures_per_shader_stage: 2,
+        // The arena (nodes, triangles) and the pairs' poses.
+        max_sampled_textures_per_shader_stage: 3,
         // The arena layout, the capacities, the traversal level.
         max_uniform_buffers_per_shader_stage: 3,
         max_bind_groups: 2,
@@ -34,8 +34,9 @@ pub fn requirements() -> wgpu::Limits {
         max_compute_workgroup_storage_size: BOX_TILE * 64,
         max_compute_workgroup_size_z: 1,
         max_compute_workgroups_per_dimension: 1,
-        // One node (5 texels) per row at least.
-        max_texture_dimension_2d: 8,
+        // The pose texture's rows are 2,048 texels (512 pairs of four; WebGPU's and WebGL 2's
+        // minimum); the arena needs one node (5 texels) per row at least.
+        max_texture_dimension_2d: 2048,
         // Two layers at least (wgpu's GL backend, see `pack::MIN_LAYERS`).
         max_texture_array_layers: 2,
         ..wgpu::Limits::downlevel_webgl2_defaults()
@@ -581,6 +582,17 @@ impl Pipelines {
                 storage(6, false),
                 storage(7, false),
                 uniform(8),
+                // The pairs' poses as rgba32uint texels (`query::POSE_TEXELS`).
+                wgpu::BindGroupLayoutEntry {
+                    binding: 9,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Uint,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
             ],
         );
         let ctrl_bgl = bgl(

@@ -17,6 +17,13 @@ const ENTRY_BYTES: u64 = 16;
 const PARAMS_BYTES: u64 = std::mem::size_of::<Params>() as u64;
 /// Bytes of one `PairInfo` (prelude).
 const PAIR_BYTES: u64 = std::mem::size_of::<PairInfo>() as u64;
+/// Pairs per row of the pose texture (`traverse.wgsl`'s `poses`: four rgba32uint texels each,
+/// 2,048 texels a row, within every device's 2D texture limit).
+const POSE_PAIRS_PER_ROW: u32 = 512;
+/// Texels per pair in the pose texture.
+const POSE_TEXELS: u32 = 4;
+/// Bytes of one full row of the pose texture.
+const POSE_ROW_BYTES: usize = (POSE_PAIRS_PER_ROW * POSE_TEXELS * 16) as usize;
 /// Re-runs allowed after overflows before giving up (each at least doubles a buffer).
 const MAX_RERUNS: u32 = 32;
 /// Timestamps one batch may write with pass timers on: pass start, after `init`, after each
@@ -167,6 +174,8 @@ struct Buffers {
     out: wgpu::Buffer,
     params: wgpu::Buffer,
     pairs: wgpu::Buffer,
+    /// The pairs' f32 poses and arena bases as texels (both passes read them there).
+    poses: wgpu::Texture,
     staging: wgpu::Buffer,
     /// Pass timers: the timestamp queries and the buffer they resolve into.
     timers: Option<(wgpu::QuerySet, wgpu::Buffer)>,
@@ -289,6 +298,27 @@ impl QueryScratch {
         let tris = buf("frcd-gpgpu triangle list", tsize, B::STORAGE);
         let params = buf("frcd-gpgpu params", PARAMS_BYTES, B::UNIFORM | B::COPY_DST);
         let pairs = buf("frcd-gpgpu pair table", psize, B::STORAGE | B::COPY_DST);
+        // `prepare` refused batches with more rows than the device's 2D textures hold.
+        let pose_rows = self
+            .pair_cap
+            .div_ceil(POSE_PAIRS_PER_ROW)
+            .min(ctx.limits.max_texture_dimension_2d)
+            .max(1);
+        let poses = d.create_texture(&wgpu::TextureDescriptor {
+            label: Some("frcd-gpgpu poses"),
+            size: wgpu::Extent3d {
+                width: POSE_PAIRS_PER_ROW * POSE_TEXELS,
+                height: pose_rows,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba32Uint,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        let poses_view = poses.create_view(&wgpu::TextureViewDescriptor::default());
         let timers = ctx.pass_timers.then(|| {
             let set = d.create_query_set(&wgpu::QuerySetDescriptor {
                 label: Some("frcd-gpgpu pass timers"),
@@ -322,6 +352,10 @@ impl QueryScratch {
                     crate::context::entry(6, &args[(k + 1) % 3]),
                     crate::context::entry(7, &args[(k + 2) % 3]),
                     crate::context::entry(8, &level[k]),
+                    wgpu::BindGroupEntry {
+                        binding: 9,
+                        resource: wgpu::BindingResource::TextureView(&poses_view),
+                    },
                 ],
             })
         };
@@ -353,6 +387,7 @@ impl QueryScratch {
             out,
             params,
             pairs,
+            poses,
             staging,
             timers,
             out_offset,
@@ -537,6 +572,47 @@ fn decide_entries(
         return segments.into_par_iter().map(decide).collect();
     }
     segments.into_iter().map(decide).collect()
+}
+
+/// Uploads the pairs' f32 poses and arena bases into the pose texture (whole rows; the tail of
+/// the last row is zero and never read).
+fn write_poses(queue: &wgpu::Queue, poses: &wgpu::Texture, infos: &[PairInfo]) {
+    let rows = (infos.len() as u32).div_ceil(POSE_PAIRS_PER_ROW);
+    let mut bytes = vec![0u8; rows as usize * POSE_ROW_BYTES];
+    for (texels, info) in bytes.chunks_exact_mut(64).zip(infos) {
+        texels.copy_from_slice(bytemuck::cast_slice(&pose_texels(info)));
+    }
+    queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture: poses,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        &bytes,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(POSE_ROW_BYTES as u32),
+            rows_per_image: Some(rows),
+        },
+        wgpu::Extent3d {
+            width: POSE_PAIRS_PER_ROW * POSE_TEXELS,
+            height: rows,
+            depth_or_array_layers: 1,
+        },
+    );
+}
+
+/// One pair's four pose texels (`traverse.wgsl`'s `load_pose`): rows of R with t's
+/// coordinates in w, as f32 bits, then the arena bases.
+fn pose_texels(info: &PairInfo) -> [[u32; 4]; 4] {
+    let row = |r: &[f32; 4], t: f32| [r[0].to_bits(), r[1].to_bits(), r[2].to_bits(), t.to_bits()];
+    [
+        row(&info.r0, info.t[0]),
+        row(&info.r1, info.t[1]),
+        row(&info.r2, info.t[2]),
+        info.base,
+    ]
 }
 
 /// Timestamps a batch writes with pass timers on (0: too deep to time).
@@ -795,11 +871,15 @@ impl GpuContext {
     }
 
     fn prepare(&self, pairs: &[BodyPair<'_>]) -> Result<Prepared, GpuError> {
-        if pairs.len() as u64 >= u32::MAX as u64 / 2 {
+        // The pose texture holds `POSE_PAIRS_PER_ROW` pairs per row, as many rows as the
+        // device's 2D textures allow (8,192 by WebGPU's defaults: 4.2M pairs).
+        let most = (u32::MAX as u64 / 2)
+            .min(POSE_PAIRS_PER_ROW as u64 * self.limits.max_texture_dimension_2d as u64);
+        if pairs.len() as u64 >= most {
             return Err(GpuError::CapacityExceeded {
                 what: "body pairs in one batch",
                 needed: pairs.len() as u64,
-                limit: u32::MAX as u64 / 2,
+                limit: most - 1,
             });
         }
         let mut p = Prepared {
@@ -881,6 +961,7 @@ impl GpuContext {
         } else {
             self.queue
                 .write_buffer(&bufs.pairs, 0, bytemuck::cast_slice(&p.infos));
+            write_poses(&self.queue, &bufs.poses, &p.infos);
             let roots: Vec<[u32; 4]> = (0..n).map(|k| [k, 0, 0, 0]).collect();
             self.queue
                 .write_buffer(&bufs.frontier[0], 0, bytemuck::cast_slice(&roots));

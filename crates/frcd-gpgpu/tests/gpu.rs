@@ -496,6 +496,59 @@ fn a_frame_of_many_pairs_is_one_submission() {
     );
 }
 
+/// A batch of more body pairs than one row of the pose texture holds (512 pairs a row): every
+/// pair reads its own pose and arena bases, in every row and at the rows' edges. Each pair has a
+/// pose of its own (two meshes, touching and apart by turns), so a pair reading its neighbour's
+/// texels, or the first row's, would give another answer than the oracle's.
+#[test]
+fn batches_spanning_several_pose_rows_equal_the_oracle() {
+    let Some(ctx) = shared() else { return };
+    let bodies = [
+        body(ctx, shapes::icosphere(1.0, 1)),
+        body(ctx, shapes::cuboid(DVec3::new(0.9, 0.4, 0.2))),
+    ];
+    let mut rng = StdRng::seed_from_u64(1300);
+    let n = 1300;
+    let poses: Vec<(Pose, Pose)> = (0..n)
+        .map(|k| {
+            let axis = DVec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            )
+            .normalize_or(DVec3::Z);
+            // Centres 1.4-2.6 apart: some pairs touch, some do not.
+            let d = 1.4 + 1.2 * ((k * 37) % 100) as f64 / 100.0;
+            (
+                Pose::new(DVec3::new(k as f64, 0.0, 0.0), DQuat::IDENTITY),
+                Pose::new(
+                    DVec3::new(k as f64 + d * axis.x, d * axis.y, d * axis.z),
+                    DQuat::from_axis_angle(axis, rng.random_range(0.0..6.0)),
+                ),
+            )
+        })
+        .collect();
+    let batch: Vec<_> = poses
+        .iter()
+        .enumerate()
+        .map(|(k, (pa, pb))| (&bodies[k % 2].gpu, pa, &bodies[(k / 2) % 2].gpu, pb))
+        .collect();
+    let got = ctx
+        .collide_batch(&batch, &mut QueryScratch::default())
+        .unwrap();
+    let mut touching = [0usize; 3];
+    for (k, (pa, pb)) in poses.iter().enumerate() {
+        let want = oracle::pairs(&bodies[k % 2].mesh, pa, &bodies[(k / 2) % 2].mesh, pb);
+        assert_eq!(got.results[k].pairs, want, "body pair {k}");
+        touching[k / 512] += usize::from(!want.is_empty());
+    }
+    // Each of the three rows has touching pairs and pairs apart.
+    for (row, &t) in touching.iter().enumerate() {
+        let size = (n - 512 * row).min(512);
+        assert!(t > 0 && t < size, "row {row}: {t} of {size} touching");
+    }
+}
+
 /// `Recheck::Uncertain`: the GPU's touching pairs are taken without the exact test, so the
 /// answers must still equal the oracle's (the bounds hold on this adapter), the counts of
 /// GPU-decided and uncertain pairs are the same as with `Recheck::All`, and nothing is refuted.
