@@ -74,5 +74,6 @@ pub use pack::{MAX_MAGNITUDE, TexLayout};
 pub use query::{
     BatchTimings, BodyPair, GpuBatch, GpuCollision, PendingBatch, QueryScratch, SubmittedBatch,
 };
+pub use sweep::ALL_PAIRS_MAX_BODIES;
 /// The wgpu this crate is built on (to create a device for [`GpuContext::from_device`]).
 pub use wgpu;

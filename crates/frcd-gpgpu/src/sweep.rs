@@ -7,6 +7,12 @@ use crate::{GpuContext, GpuError};
 use frcd_geom::Aabb;
 use frcd_gpu::layout::{BodyBox, BoxParams, SortStage};
 
+/// Bodies up to which [`GpuContext::broad_phase`] takes the all-pairs pass: its one dispatch
+/// beats the sweep's sort passes there. Measured on `cargo xtask bench gpgpu --boxes-only`:
+/// lavapipe (2 cores, 2026-12-01) all-pairs / sweep 0.43 at 64 bodies, 0.88 at 256 and 1.9 at
+/// 512; an NVIDIA H200 (2026-11-28) 0.85 at 256 and 0.69 at 4,096.
+pub const ALL_PAIRS_MAX_BODIES: usize = 256;
+
 /// Workgroup size of every sweep pass (must match `WG` in sweep.wgsl).
 const WG: u32 = 64;
 /// Keys sorted per workgroup in workgroup memory (must match `BLOCK` in sweep.wgsl).
@@ -218,6 +224,34 @@ fn permuted(mut b: BodyBox, axis: usize) -> BodyBox {
 }
 
 impl GpuContext {
+    /// The GPU broad phase with the form that is faster for the count: the all-pairs pass
+    /// ([`GpuContext::overlapping_bodies_all_pairs`]) up to [`ALL_PAIRS_MAX_BODIES`] bodies,
+    /// the sort-and-sweep ([`GpuContext::overlapping_bodies`]) above. The same answer either
+    /// way; one submission and one readback.
+    ///
+    /// ```no_run
+    /// # use frcd_gpgpu::{BoxScratch, GpuContext};
+    /// # use frcd_geom::{Aabb, DVec3};
+    /// let ctx = GpuContext::headless()?;
+    /// let boxes: Vec<Aabb> = (0..64)
+    ///     .map(|i| Aabb::new(DVec3::X * i as f64, DVec3::X * i as f64 + DVec3::splat(1.5)))
+    ///     .collect();
+    /// let found = ctx.broad_phase(&boxes, &mut BoxScratch::default())?;
+    /// assert_eq!(found.pairs.len(), 63);
+    /// # Ok::<(), frcd_gpgpu::GpuError>(())
+    /// ```
+    pub fn broad_phase(
+        &self,
+        boxes: &[Aabb],
+        scratch: &mut BoxScratch,
+    ) -> Result<BodyPairs, GpuError> {
+        if boxes.len() <= ALL_PAIRS_MAX_BODIES {
+            self.overlapping_bodies_all_pairs(boxes, scratch)
+        } else {
+            self.overlapping_bodies(boxes, scratch)
+        }
+    }
+
     /// Every pair of bodies whose world boxes overlap (closed boxes), on the GPU by sort-based
     /// sweep and prune in O(n log n + pairs): the boxes are rounded outward to f32 (and inward,
     /// for the "surely overlapping" test), bitonic-sorted by their minimum on the axis of

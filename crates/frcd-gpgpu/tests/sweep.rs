@@ -234,3 +234,25 @@ fn equals_the_world_broad_phase() {
         world.set_poses(&moves).unwrap();
     }
 }
+
+/// `broad_phase` takes the all-pairs pass up to `ALL_PAIRS_MAX_BODIES` bodies and the sweep
+/// above: on both sides of the threshold it equals the f64 answer, and with one scratch used
+/// across the threshold (each form keeps its own buffers) every answer stays right.
+#[test]
+fn the_broad_phase_equals_the_f64_answer_on_both_sides_of_its_threshold() {
+    let Some(ctx) = ctx() else { return };
+    let mut rng = StdRng::seed_from_u64(256);
+    let mut scratch = BoxScratch::default();
+    let t = frcd_gpgpu::ALL_PAIRS_MAX_BODIES;
+    for n in [2, 64, t - 1, t, t + 1, 2 * t, t, 64] {
+        let boxes = random_boxes(&mut rng, n, 10.0, 1.2, -5.0);
+        let want = brute(&boxes);
+        assert!(!want.is_empty() || n < 64, "{n} bodies: no overlap to find");
+        let got = ctx.broad_phase(&boxes, &mut scratch).unwrap();
+        assert_eq!(got.pairs, want, "{n} bodies");
+        let sweep = ctx
+            .overlapping_bodies(&boxes, &mut BoxScratch::default())
+            .unwrap();
+        assert_eq!(got.pairs, sweep.pairs, "{n} bodies: against the sweep");
+    }
+}

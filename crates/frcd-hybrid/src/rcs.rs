@@ -58,7 +58,7 @@ impl Checker {
                             .inflated(margin * 0.5)
                     })
                     .collect();
-                match g.ctx.overlapping_bodies(&boxes, &mut state.gpu_boxes) {
+                match g.ctx.broad_phase(&boxes, &mut state.gpu_boxes) {
                     Ok(f) => {
                         let mut v: Vec<(u32, u32)> = f
                             .pairs
