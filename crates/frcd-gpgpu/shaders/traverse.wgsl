@@ -12,9 +12,13 @@
 // flagged "uncertain" when a sign it needs is within the bound of zero.
 //
 // Everything is computed in A's local frame: B's geometry is mapped by the pair's relative pose
-// (R, t). Every mesh of a context lives in one pair of arena textures (rgba32float, one texel =
-// 4 floats), each tree in its own local frame, at the item offsets of its pair entry:
-//   node i: 5 texels  (c.xyz, eps) (a0.xyz, h0) (a1.xyz, h1) (a2.xyz, h2) (right, first, count, 0)
+// (R, t). Every mesh of a context lives in one pair of arena textures (nodes rgba32uint, the
+// f32 words as bits; triangles rgba32float; one texel = 4 words), each tree in its own local
+// frame, at the item offsets of its pair entry:
+//   node i: 4 texels (64 bytes) (c.xyz, link) (a0.xyz, h0 | leaf) (a1.xyz, h1) (a2.xyz, h2):
+//   link = the right child (internal; the left child is i + 1) or first | (count - 1) << 24
+//   (leaf); leaf = bit 31 of h0's word (a sign bit: h0 >= 0). The axes' bound eps (see
+//   `obb_overlap`) is one per mesh, the pair's sum in the pose texture.
 //   triangle j (leaf order): 3 texels (o0.xyz, mesh index) (o1.xyz, k1) (o2.xyz, k2): the
 //   vertices' offsets o = v - c from a reference point c = k 2^e on the mesh's power-of-two grid
 //   (k an integer vector, |k_i| <= 2^13, packed into k1 and k2; e per mesh, in PairInfo.fix);
@@ -58,7 +62,7 @@ override EXACT_PATH: bool = true;
 
 // State, Params, Arena and PairInfo come from the prelude (frcd-gpu).
 
-@group(0) @binding(0) var nodes: texture_2d_array<f32>;
+@group(0) @binding(0) var nodes: texture_2d_array<u32>;
 @group(0) @binding(1) var tris: texture_2d_array<f32>;
 @group(0) @binding(2) var<uniform> arena: Arena;
 
@@ -82,9 +86,10 @@ override EXACT_PATH: bool = true;
 @group(1) @binding(6) var<storage, read_write> args_next: array<atomic<u32>, 4>;
 @group(1) @binding(7) var<storage, read_write> args_after: array<u32, 4>;
 @group(1) @binding(8) var<uniform> level: Level;
-// Both passes: each pair's f32 pose and arena bases as four rgba32uint texels, pair p at texels
-// 4 (p mod 512) + k of row p / 512: (R row 0, t.x) (R row 1, t.y) (R row 2, t.z) as f32 bits,
-// then `PairInfo.base`. The same words as `pairs[p]` (r0-r2, t, base); read as texels because a
+// Both passes: each pair's f32 pose and arena bases as five rgba32uint texels, pair p at texels
+// 5 (p mod 256) + k of row p / 256: (R row 0, t.x) (R row 1, t.y) (R row 2, t.z) as f32 bits,
+// `PairInfo.base`, then (eps_A + eps_B, 0, 0, 0), the meshes' axes' bound (`obb_overlap`).
+// The pose words are those of `pairs[p]` (r0-r2, t, base); read as texels because a
 // software driver such as llvmpipe fetches a texel for its whole vector of invocations at once,
 // where a storage-buffer load of an index that varies across lanes becomes a loop over the
 // lanes with a bounds check per word (measured 2026-12-01: those loops were a fifth of the
@@ -93,15 +98,20 @@ override EXACT_PATH: bool = true;
 
 // The pair this invocation works on.
 var<private> pose: PairInfo;
+// Its meshes' bound on their axes' distance to an orthonormal frame, eps_A + eps_B (see
+// `obb_overlap`).
+var<private> pose_eps: f32;
+
+const LEAF_FLAG: u32 = 0x80000000u;
 
 struct Node {
     c: vec3<f32>,
-    // Bound on the axes' distance to an orthonormal frame (see `obb_overlap`).
-    eps: f32,
     a0: vec3<f32>,
     a1: vec3<f32>,
     a2: vec3<f32>,
     h: vec3<f32>,
+    leaf: bool,
+    // Internal: the right child. Leaf: first triangle and count.
     right: u32,
     first: u32,
     count: u32,
@@ -119,23 +129,28 @@ fn texel(t: texture_2d_array<f32>, s: vec3<u32>, k: u32) -> vec4<f32> {
     return textureLoad(t, vec2<u32>(s.x + k, s.y), s.z, 0);
 }
 
+fn node_texel(s: vec3<u32>, k: u32) -> vec4<u32> {
+    return textureLoad(nodes, vec2<u32>(s.x + k, s.y), s.z, 0);
+}
+
+// A bit cast is exact; a subnormal word a driver flushes when it computes with it is inside
+// the TAU terms of `obb_overlap`'s bound.
 fn load_node(i: u32) -> Node {
-    let s = slot(arena.node_layout, 5u, i);
-    let t0 = texel(nodes, s, 0u);
-    let t1 = texel(nodes, s, 1u);
-    let t2 = texel(nodes, s, 2u);
-    let t3 = texel(nodes, s, 3u);
-    let t4 = texel(nodes, s, 4u);
+    let s = slot(arena.node_layout, 4u, i);
+    let t0 = node_texel(s, 0u);
+    let t1 = node_texel(s, 1u);
+    let t2 = node_texel(s, 2u);
+    let t3 = node_texel(s, 3u);
     var n: Node;
-    n.c = t0.xyz;
-    n.eps = t0.w;
-    n.a0 = t1.xyz;
-    n.a1 = t2.xyz;
-    n.a2 = t3.xyz;
-    n.h = vec3<f32>(t1.w, t2.w, t3.w);
-    n.right = u32(t4.x);
-    n.first = u32(t4.y);
-    n.count = u32(t4.z);
+    n.c = bitcast<vec3<f32>>(t0.xyz);
+    n.a0 = bitcast<vec3<f32>>(t1.xyz);
+    n.a1 = bitcast<vec3<f32>>(t2.xyz);
+    n.a2 = bitcast<vec3<f32>>(t3.xyz);
+    n.h = bitcast<vec3<f32>>(vec3<u32>(t1.w & ~LEAF_FLAG, t2.w, t3.w));
+    n.leaf = (t1.w & LEAF_FLAG) != 0u;
+    n.right = t0.w;
+    n.first = t0.w & 0xffffffu;
+    n.count = select(0u, (t0.w >> 24u) + 1u, n.leaf);
     return n;
 }
 
@@ -143,8 +158,8 @@ fn load_node(i: u32) -> Node {
 // from `pairs` by the triangle pass). A bit cast is exact; a subnormal word a driver flushes
 // when it computes with it is inside the TAU terms of every bound.
 fn load_pose(p: u32) {
-    let col = (p & 511u) * 4u;
-    let row = p >> 9u;
+    let col = (p & 255u) * 5u;
+    let row = p >> 8u;
     let w0 = textureLoad(poses, vec2<u32>(col, row), 0);
     let w1 = textureLoad(poses, vec2<u32>(col + 1u, row), 0);
     let w2 = textureLoad(poses, vec2<u32>(col + 2u, row), 0);
@@ -153,6 +168,7 @@ fn load_pose(p: u32) {
     pose.r2 = vec4<f32>(bitcast<vec3<f32>>(w2.xyz), 0.0);
     pose.t = vec4<f32>(bitcast<f32>(w0.w), bitcast<f32>(w1.w), bitcast<f32>(w2.w), 0.0);
     pose.base = textureLoad(poses, vec2<u32>(col + 3u, row), 0);
+    pose_eps = bitcast<f32>(textureLoad(poses, vec2<u32>(col + 4u, row), 0).x);
 }
 
 fn rot(v: vec3<f32>) -> vec3<f32> {
@@ -175,7 +191,9 @@ fn maxabs(v: vec3<f32>) -> f32 {
 // Error bound (valid for any rounding direction, FMA contraction and flush-to-zero; U, TAU as
 // above). The boxes are the f32 parallelepipeds {c + sum s_i h_i a_i}; their axes are only
 // near-orthonormal: the CPU stores in (c, w) an eps_A >= max_i |a_i - q_i|_2 for an orthonormal
-// Q_A (3 max|A^T A - I|, via the polar factor; see `pack::ObbF32::axes_deviation`). Box A lies in
+// Q_A (3 max|A^T A - I|, via the polar factor; see `pack::ObbF32::axes_deviation`; one bound per
+// mesh, the largest of its nodes', as err only grows with it; the pair's eps_A + eps_B comes
+// rounded up from the CPU in `pose_eps`). Box A lies in
 // the orthonormal box (c, Q_A, h_i + eps_A sum h), likewise B, and the exact Gottschalk test of
 // those boxes (exact pose R64, t64) is what the computed test must imply. With
 // eps = eps_A + eps_B + U (U also covers R64's f64 non-orthogonality), per entry:
@@ -193,7 +211,7 @@ fn maxabs(v: vec3<f32>) -> f32 {
 //   + (20U + 4 eps) (sum h_A + sum h_B) + 128 TAU (1 + sum h + |tt|_1) (flush-to-zero: each of
 // the ~20 operations behind an entry may lose TAU, later scaled by at most h, |tt| or 1), all
 // terms >= 0, times 1.01 for the ~15 roundings of err itself. The same err serves all 15 axes.
-fn obb_overlap(na: Node, nb: Node, eps_a: f32, eps_b: f32) -> bool {
+fn obb_overlap(na: Node, nb: Node, eps_ab: f32) -> bool {
     let b0 = rot(nb.a0);
     let b1 = rot(nb.a1);
     let b2 = rot(nb.a2);
@@ -208,7 +226,7 @@ fn obb_overlap(na: Node, nb: Node, eps_a: f32, eps_b: f32) -> bool {
     let sha = ha.x + ha.y + ha.z;
     let shb = hb.x + hb.y + hb.z;
     let ltt = l1(tt);
-    let eps = eps_a + eps_b + U;
+    let eps = eps_ab + U;
     let err = (20.0 * U * (l1(nb.c) + l1(pose.t.xyz)) + (48.0 * U + 5.0 * eps) * ltt
         + (20.0 * U + 4.0 * eps) * (sha + shb)
         + 128.0 * TAU * (1.0 + sha + shb + ltt)) * 1.01;
@@ -663,11 +681,11 @@ fn traverse(@builtin(workgroup_id) wid: vec3<u32>,
     let pair = entry.yz;
     let na = load_node(pose.base.x + pair.x);
     let nb = load_node(pose.base.z + pair.y);
-    if !obb_overlap(na, nb, na.eps, nb.eps) {
+    if !obb_overlap(na, nb, pose_eps) {
         return;
     }
-    let a_leaf = na.count > 0u;
-    let b_leaf = nb.count > 0u;
+    let a_leaf = na.leaf;
+    let b_leaf = nb.leaf;
     if a_leaf && b_leaf {
         leaf_pair(entry.x, na, nb);
         return;

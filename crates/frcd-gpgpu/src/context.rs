@@ -545,12 +545,12 @@ fn uniform(binding: u32) -> wgpu::BindGroupLayoutEntry {
     }
 }
 
-fn texture(binding: u32) -> wgpu::BindGroupLayoutEntry {
+fn texture(binding: u32, sample_type: wgpu::TextureSampleType) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
         ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            sample_type,
             view_dimension: wgpu::TextureViewDimension::D2Array,
             multisampled: false,
         },
@@ -568,7 +568,12 @@ impl Pipelines {
         };
         let arena_bgl = bgl(
             "frcd-gpgpu mesh arena",
-            &[texture(0), texture(1), uniform(2)],
+            &[
+                // Nodes (f32 bits and links), triangles.
+                texture(0, wgpu::TextureSampleType::Uint),
+                texture(1, wgpu::TextureSampleType::Float { filterable: false }),
+                uniform(2),
+            ],
         );
         let trav_bgl = bgl(
             "frcd-gpgpu traversal buffers",

@@ -215,7 +215,8 @@ fn rot(p: &PoseF, v: V3) -> V3 {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct NodeF {
     pub c: V3,
-    /// The axes' distance bound to an orthonormal frame (texel 0's w).
+    /// The axes' distance bound to an orthonormal frame that the shader uses for this node: its
+    /// mesh's (the largest of the mesh's nodes', `pack::PackedTree::eps`).
     pub eps: f32,
     pub a: [V3; 3],
     pub h: V3,
@@ -233,7 +234,9 @@ pub(crate) fn obb_overlap(p: &PoseF, na: &NodeF, nb: &NodeF) -> bool {
     let sha = add(add(ha.x, ha.y), ha.z);
     let shb = add(add(hb.x, hb.y), hb.z);
     let ltt = l1(tt);
-    let eps = add(add(na.eps, nb.eps), U);
+    // The pose texture's eps_A + eps_B, summed and rounded up on the CPU (`query::prepare`).
+    let eps_ab = crate::pack::round_up(na.eps as f64 + nb.eps as f64);
+    let eps = add(eps_ab, U);
     let err = mul(
         add(
             add(
@@ -1039,12 +1042,20 @@ mod tests {
         out
     }
 
-    fn node_f(tree: &ObbTree, i: usize) -> NodeF {
+    /// The mesh's axes' bound, as `pack::PackedTree::eps` (the largest of its nodes').
+    fn mesh_eps(tree: &ObbTree) -> f32 {
+        (0..tree.node_count())
+            .map(|k| obb_to_f32(&tree.node(k as u32).obb, k).unwrap().axes_deviation())
+            .fold(0f32, f32::max)
+    }
+
+    /// Node `i` as the shader sees it, with its mesh's axes' bound `eps` ([`mesh_eps`]).
+    fn node_f(tree: &ObbTree, i: usize, eps: f32) -> NodeF {
         let b = obb_to_f32(&tree.node(i as u32).obb, i).unwrap();
         let c = |x: [f32; 3]| v3(x[0], x[1], x[2]);
         NodeF {
             c: c(b.center),
-            eps: b.axes_deviation(),
+            eps,
             a: [c(b.axes[0]), c(b.axes[1]), c(b.axes[2])],
             h: v3(b.half_extents[0], b.half_extents[1], b.half_extents[2]),
         }
@@ -1102,11 +1113,12 @@ mod tests {
                     }
                 }
             }
+            let (ea, eb) = (mesh_eps(&ta), mesh_eps(&tb));
             for env in envs(1.0) {
                 set_env(env);
                 for &(x, y) in &node_pairs {
                     assert!(
-                        obb_overlap(&pose, &node_f(&ta, x), &node_f(&tb, y)),
+                        obb_overlap(&pose, &node_f(&ta, x, ea), &node_f(&tb, y, eb)),
                         "{env:?}: nodes ({x}, {y}) separated above a touching pair"
                     );
                 }

@@ -27,6 +27,8 @@ pub(crate) struct ArenaTex {
     next_row: u64,
     max_layers: u32,
     label: &'static str,
+    /// `Rgba32Uint` (nodes: f32 bits and links) or `Rgba32Float` (triangles).
+    format: wgpu::TextureFormat,
 }
 
 /// The mesh arena of a context (behind its mutex).
@@ -43,6 +45,7 @@ fn arena_texture(
     ctx_device: &wgpu::Device,
     label: &'static str,
     layout: &TexLayout,
+    format: wgpu::TextureFormat,
 ) -> wgpu::Texture {
     ctx_device.create_texture(&wgpu::TextureDescriptor {
         label: Some(label),
@@ -54,7 +57,7 @@ fn arena_texture(
         mip_level_count: 1,
         sample_count: 1,
         dimension: wgpu::TextureDimension::D2,
-        format: wgpu::TextureFormat::Rgba32Float,
+        format,
         usage: wgpu::TextureUsages::TEXTURE_BINDING
             | wgpu::TextureUsages::COPY_DST
             | wgpu::TextureUsages::COPY_SRC,
@@ -87,6 +90,7 @@ impl ArenaTex {
         device: &wgpu::Device,
         label: &'static str,
         texels_per_item: u32,
+        format: wgpu::TextureFormat,
         opts: &ArenaOptions,
         limits: &wgpu::Limits,
     ) -> Result<Self, GpuError> {
@@ -113,7 +117,7 @@ impl ArenaTex {
             layers: 0,
         };
         layout.layers = layers_for(&layout, 2);
-        let texture = arena_texture(device, label, &layout);
+        let texture = arena_texture(device, label, &layout, format);
         Ok(Self {
             view: view_of(&texture, label),
             texture,
@@ -121,6 +125,7 @@ impl ArenaTex {
             next_row: 0,
             max_layers: limits.max_texture_array_layers,
             label,
+            format,
         })
     }
 
@@ -148,7 +153,7 @@ impl ArenaTex {
             if layout.layers > self.max_layers {
                 layout.layers = layers as u32;
             }
-            let texture = arena_texture(&ctx.device, self.label, &layout);
+            let texture = arena_texture(&ctx.device, self.label, &layout, self.format);
             let mut enc = ctx
                 .device
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -173,8 +178,8 @@ impl ArenaTex {
         Ok((start, grown))
     }
 
-    /// Writes `texels` (whole rows, row-major) from global row `row0` on.
-    fn write(&self, ctx: &GpuContext, row0: u64, texels: &[[f32; 4]]) {
+    /// Writes `texels` (whole rows, row-major, 16 bytes each) from global row `row0` on.
+    fn write(&self, ctx: &GpuContext, row0: u64, texels: &[[u32; 4]]) {
         let width = self.layout.width() as usize;
         let per_layer = self.layout.rows_per_layer as u64;
         let rows = (texels.len() / width) as u64;
@@ -219,11 +224,19 @@ impl Arena {
         limits: &wgpu::Limits,
         opts: &ArenaOptions,
     ) -> Result<Self, GpuError> {
-        let nodes = ArenaTex::new(device, "frcd-gpgpu node arena", NODE_TEXELS, opts, limits)?;
+        let nodes = ArenaTex::new(
+            device,
+            "frcd-gpgpu node arena",
+            NODE_TEXELS,
+            wgpu::TextureFormat::Rgba32Uint,
+            opts,
+            limits,
+        )?;
         let tris = ArenaTex::new(
             device,
             "frcd-gpgpu triangle arena",
             TRI_TEXELS,
+            wgpu::TextureFormat::Rgba32Float,
             opts,
             limits,
         )?;
@@ -308,6 +321,8 @@ pub struct GpuMesh {
     pub(crate) mesh: Arc<TriMesh>,
     /// Exponent of the triangles' reference-point grid (`pack::grid_exponent`).
     pub(crate) grid: Option<i32>,
+    /// The largest deviation of the nodes' f32 axes from orthonormal (`pack::PackedTree::eps`).
+    pub(crate) eps: f32,
     bytes: u64,
 }
 
@@ -370,6 +385,7 @@ impl GpuContext {
             tri_layout,
             depth,
             grid,
+            eps,
         } = pack_tree_rows(
             tree,
             arena.nodes.layout.items_per_row,
@@ -394,7 +410,7 @@ impl GpuContext {
             }
         }
         arena.nodes.write(self, node_row, &nodes);
-        arena.tris.write(self, tri_row, &tris);
+        arena.tris.write(self, tri_row, bytemuck::cast_slice(&tris));
         if g1 || g2 {
             let Arena {
                 nodes,
@@ -415,6 +431,7 @@ impl GpuContext {
             max_leaf,
             mesh: tree.mesh().clone(),
             grid,
+            eps,
             bytes,
         })
     }

@@ -1,15 +1,19 @@
 //! CPU side of the texture mapping: an f64 OBB tree becomes f32 texels, rounded so that the f32
 //! boxes contain the f64 ones.
 //!
-//! Layout (both textures `rgba32float`, 2D arrays, item `i` at slot `i` in row-major order over
-//! (layer, row, item-in-row), see [`TexLayout::slot`]):
+//! Layout (2D arrays, nodes `rgba32uint`, triangles `rgba32float`, item `i` at slot `i` in
+//! row-major order over (layer, row, item-in-row), see [`TexLayout::slot`]):
 //!
 //! | item | texels |
 //! |---|---|
-//! | node | `(c, eps) (a0, h0) (a1, h1) (a2, h2) (right, first, count, 0)` |
+//! | node | `(c, link) (a0, h0 \| leaf) (a1, h1) (a2, h2)`: f32 bits, 64 bytes (one cache line) |
 //! | triangle (leaf order) | `(o0, mesh index) (o1, k word 1) (o2, k word 2)` |
 //!
-//! Indices are stored as f32, exact below 2^24, so trees are limited to 2^24 nodes and
+//! A node's `link` is its right child (internal; the left is the next node) or, for a leaf,
+//! `first | (count - 1) << 24`; bit 31 of `h0`'s word (a sign bit, `h0 >= 0`) marks a leaf
+//! ([`node_texels_of`]). The axes' deviation from orthonormal is one bound per mesh
+//! ([`PackedTree::eps`], the largest of its nodes'), which the pair's pose carries to the shader.
+//! Triangle indices are stored as f32, exact below 2^24, so trees are limited to 2^24 nodes and
 //! triangles ([`MAX_ITEMS`]).
 //!
 //! **Triangles about a grid point.** Each mesh gets a power-of-two grid `g = 2^e`
@@ -27,16 +31,18 @@
 //! `eta = (u ‖c‖₂ + √3 u ‖h‖₂) / σ_min(A32)` (`u = 2^-24`), rounded up: any point `c + A s` equals
 //! `c32 + A32 (s + Δs)` with `‖Δs‖∞ <= ‖A32⁻¹‖ ‖(c - c32) + (A - A32) s‖₂ <= eta`, so the f32 box
 //! holds the f64 box. The GPU's separating-axis test (Gottschalk's form, which assumes orthonormal
-//! axes) reads the node's [`ObbF32::axes_deviation`] from texel 0's `w` and widens its error
-//! bound by it, so `A32`'s residual non-orthogonality never culls a pair; it also bounds its own
-//! arithmetic.
+//! axes) widens its error bound by the mesh's largest [`ObbF32::axes_deviation`] (the bound only
+//! grows with it, so one bound per mesh is as safe as one per node), so `A32`'s residual
+//! non-orthogonality never culls a pair; it also bounds its own arithmetic.
 
 use crate::GpuError;
 use frcd_geom::{DMat3, DVec3, Obb};
 use frcd_obb::ObbTree;
 
-/// Texels per node.
-pub const NODE_TEXELS: u32 = 5;
+/// Texels per node (64 bytes).
+pub const NODE_TEXELS: u32 = 4;
+/// Bit 31 of a node's texel 1 `w` word: the node is a leaf.
+pub const LEAF_FLAG: u32 = 0x8000_0000;
 /// Texels per triangle.
 pub const TRI_TEXELS: u32 = 3;
 /// Indices are stored as f32 and must stay exact: at most this many nodes or triangles.
@@ -188,8 +194,11 @@ pub struct TexLimits {
 /// A tree packed into texel arrays, ready to upload.
 #[derive(Clone, Debug)]
 pub struct PackedTree {
-    /// Node texels (layout [`PackedTree::node_layout`]).
-    pub nodes: Vec<[f32; 4]>,
+    /// Node texels as words (layout [`PackedTree::node_layout`]; see [`node_texels`]).
+    pub nodes: Vec<[u32; 4]>,
+    /// The largest of the nodes' [`ObbF32::axes_deviation`]: the mesh's bound on its f32 axes'
+    /// distance to an orthonormal frame.
+    pub eps: f32,
     /// Placement of nodes.
     pub node_layout: TexLayout,
     /// Triangle texels in leaf order (layout [`PackedTree::tri_layout`]).
@@ -353,6 +362,21 @@ pub fn obb_to_f32(obb: &Obb, node: usize) -> Result<ObbF32, GpuError> {
     })
 }
 
+/// A node's four texels as `traverse.wgsl`'s `load_node` reads them: `(c, link) (a0, h0 | leaf)
+/// (a1, h1) (a2, h2)`, f32 bits. `link` is the right child of an internal node, or a leaf's
+/// `first | (count - 1) << 24` (`first < 2^24`, `1 <= count <= 256`, checked by the caller);
+/// `leaf` sets bit 31 of `h0`'s word, whose sign bit is free (`h0 >= 0`).
+pub fn node_texels_of(b: &ObbF32, link: u32, leaf: bool) -> [[u32; 4]; 4] {
+    let bits = |v: [f32; 3], w: u32| [v[0].to_bits(), v[1].to_bits(), v[2].to_bits(), w];
+    let h = b.half_extents.map(f32::to_bits);
+    [
+        bits(b.center, link),
+        bits(b.axes[0], h[0] | if leaf { LEAF_FLAG } else { 0 }),
+        bits(b.axes[1], h[1]),
+        bits(b.axes[2], h[2]),
+    ]
+}
+
 fn depth_of(tree: &ObbTree) -> u32 {
     let nodes = tree.nodes();
     let mut best = 0;
@@ -445,10 +469,13 @@ fn pack_into(
     let nodes = tree.nodes();
     let order = tree.leaf_triangles();
     check_tree(tree)?;
-    let mut node_texels = vec![[0f32; 4]; node_layout.texel_count()];
+    let mut node_texels = vec![[0u32; 4]; node_layout.texel_count()];
+    let mut eps = 0f32;
     for (i, n) in nodes.iter().enumerate() {
         let ok = if n.is_leaf() {
-            n.first as usize + n.count as usize <= order.len()
+            n.count >= 1
+                && n.count <= crate::MAX_LEAF_TRIANGLES
+                && n.first as usize + n.count as usize <= order.len()
         } else {
             (n.right as usize) > i + 1 && (n.right as usize) < nodes.len()
         };
@@ -458,14 +485,13 @@ fn pack_into(
             )));
         }
         let b = obb_to_f32(&n.obb, i)?;
-        let t = [
-            [b.center[0], b.center[1], b.center[2], b.axes_deviation()],
-            [b.axes[0][0], b.axes[0][1], b.axes[0][2], b.half_extents[0]],
-            [b.axes[1][0], b.axes[1][1], b.axes[1][2], b.half_extents[1]],
-            [b.axes[2][0], b.axes[2][1], b.axes[2][2], b.half_extents[2]],
-            [n.right as f32, n.first as f32, n.count as f32, 0.0],
-        ];
-        for (k, texel) in t.into_iter().enumerate() {
+        eps = eps.max(b.axes_deviation());
+        let link = if n.is_leaf() {
+            n.first | (n.count - 1) << 24
+        } else {
+            n.right
+        };
+        for (k, texel) in node_texels_of(&b, link, n.is_leaf()).into_iter().enumerate() {
             node_texels[node_layout.linear(i as u32, k as u32)] = texel;
         }
     }
@@ -491,6 +517,7 @@ fn pack_into(
     }
     Ok(PackedTree {
         nodes: node_texels,
+        eps,
         node_layout,
         tris: tri_texels,
         tri_layout,
@@ -828,12 +855,28 @@ mod tests {
         };
         let p = pack_tree(&tree, &limits).unwrap();
         assert!(p.node_layout.layers > 1 && p.tri_layout.layers > 1);
+        let mut eps = 0f32;
         for (i, n) in tree.nodes().iter().enumerate() {
-            let t4 = p.nodes[p.node_layout.linear(i as u32, 4)];
-            assert_eq!(t4[0] as u32, n.right);
-            assert_eq!(t4[1] as u32, n.first);
-            assert_eq!(t4[2] as u32, n.count);
+            let t: [[u32; 4]; 4] =
+                std::array::from_fn(|k| p.nodes[p.node_layout.linear(i as u32, k as u32)]);
+            let b = obb_to_f32(&n.obb, i).unwrap();
+            eps = eps.max(b.axes_deviation());
+            let f = |x: u32| f32::from_bits(x);
+            assert_eq!([f(t[0][0]), f(t[0][1]), f(t[0][2])], b.center);
+            for k in 0..3 {
+                assert_eq!([f(t[k + 1][0]), f(t[k + 1][1]), f(t[k + 1][2])], b.axes[k]);
+                assert_eq!(f(t[k + 1][3] & !LEAF_FLAG), b.half_extents[k]);
+            }
+            assert_eq!(t[1][3] & LEAF_FLAG != 0, n.is_leaf(), "node {i}");
+            if n.is_leaf() {
+                assert_eq!(t[0][3] & 0xff_ffff, n.first);
+                assert_eq!((t[0][3] >> 24) + 1, n.count);
+            } else {
+                assert_eq!(t[0][3], n.right);
+            }
         }
+        assert_eq!(p.eps, eps);
+        assert!(eps > 0.0);
         let e = p.grid.expect("a unit sphere has a grid");
         assert_eq!(e, -GRID_BITS);
         for (slot, &index) in tree.leaf_triangles().iter().enumerate() {

@@ -17,11 +17,11 @@ const ENTRY_BYTES: u64 = 16;
 const PARAMS_BYTES: u64 = std::mem::size_of::<Params>() as u64;
 /// Bytes of one `PairInfo` (prelude).
 const PAIR_BYTES: u64 = std::mem::size_of::<PairInfo>() as u64;
-/// Pairs per row of the pose texture (`traverse.wgsl`'s `poses`: four rgba32uint texels each,
-/// 2,048 texels a row, within every device's 2D texture limit).
-const POSE_PAIRS_PER_ROW: u32 = 512;
+/// Pairs per row of the pose texture (`traverse.wgsl`'s `poses`: five rgba32uint texels each,
+/// 1,280 texels a row, within every device's 2D texture limit).
+const POSE_PAIRS_PER_ROW: u32 = 256;
 /// Texels per pair in the pose texture.
-const POSE_TEXELS: u32 = 4;
+const POSE_TEXELS: u32 = 5;
 /// Bytes of one full row of the pose texture.
 const POSE_ROW_BYTES: usize = (POSE_PAIRS_PER_ROW * POSE_TEXELS * 16) as usize;
 /// Re-runs allowed after overflows before giving up (each at least doubles a buffer).
@@ -413,6 +413,9 @@ type TrianglePair = (Arc<TriMesh>, Arc<TriMesh>);
 struct Prepared {
     /// One `PairInfo` per pair.
     infos: Vec<PairInfo>,
+    /// Per pair, the bound on both meshes' axes' deviation from orthonormal (the pose texture's
+    /// fifth texel).
+    eps: Vec<f32>,
     frames: Vec<RelativeFrame>,
     tris: Vec<TrianglePair>,
     levels: u32,
@@ -576,11 +579,14 @@ fn decide_entries(
 
 /// Uploads the pairs' f32 poses and arena bases into the pose texture (whole rows; the tail of
 /// the last row is zero and never read).
-fn write_poses(queue: &wgpu::Queue, poses: &wgpu::Texture, infos: &[PairInfo]) {
+fn write_poses(queue: &wgpu::Queue, poses: &wgpu::Texture, infos: &[PairInfo], eps: &[f32]) {
     let rows = (infos.len() as u32).div_ceil(POSE_PAIRS_PER_ROW);
     let mut bytes = vec![0u8; rows as usize * POSE_ROW_BYTES];
-    for (texels, info) in bytes.chunks_exact_mut(64).zip(infos) {
-        texels.copy_from_slice(bytemuck::cast_slice(&pose_texels(info)));
+    for (texels, (info, eps)) in bytes
+        .chunks_exact_mut(POSE_TEXELS as usize * 16)
+        .zip(infos.iter().zip(eps))
+    {
+        texels.copy_from_slice(bytemuck::cast_slice(&pose_texels(info, *eps)));
     }
     queue.write_texture(
         wgpu::TexelCopyTextureInfo {
@@ -603,15 +609,17 @@ fn write_poses(queue: &wgpu::Queue, poses: &wgpu::Texture, infos: &[PairInfo]) {
     );
 }
 
-/// One pair's four pose texels (`traverse.wgsl`'s `load_pose`): rows of R with t's
-/// coordinates in w, as f32 bits, then the arena bases.
-fn pose_texels(info: &PairInfo) -> [[u32; 4]; 4] {
+/// One pair's five pose texels (`traverse.wgsl`'s `load_pose`): rows of R with t's
+/// coordinates in w, as f32 bits, the arena bases, then the bound on both meshes' axes'
+/// deviation from orthonormal (`eps_A + eps_B`, rounded up).
+fn pose_texels(info: &PairInfo, eps: f32) -> [[u32; 4]; 5] {
     let row = |r: &[f32; 4], t: f32| [r[0].to_bits(), r[1].to_bits(), r[2].to_bits(), t.to_bits()];
     [
         row(&info.r0, info.t[0]),
         row(&info.r1, info.t[1]),
         row(&info.r2, info.t[2]),
         info.base,
+        [eps.to_bits(), 0, 0, 0],
     ]
 }
 
@@ -872,7 +880,7 @@ impl GpuContext {
 
     fn prepare(&self, pairs: &[BodyPair<'_>]) -> Result<Prepared, GpuError> {
         // The pose texture holds `POSE_PAIRS_PER_ROW` pairs per row, as many rows as the
-        // device's 2D textures allow (8,192 by WebGPU's defaults: 4.2M pairs).
+        // device's 2D textures allow (8,192 by WebGPU's defaults: 2.1M pairs).
         let most = (u32::MAX as u64 / 2)
             .min(POSE_PAIRS_PER_ROW as u64 * self.limits.max_texture_dimension_2d as u64);
         if pairs.len() as u64 >= most {
@@ -884,6 +892,7 @@ impl GpuContext {
         }
         let mut p = Prepared {
             infos: Vec::with_capacity(pairs.len()),
+            eps: Vec::with_capacity(pairs.len()),
             frames: Vec::with_capacity(pairs.len()),
             tris: Vec::with_capacity(pairs.len()),
             levels: 0,
@@ -914,6 +923,8 @@ impl GpuContext {
                 });
             }
             p.infos.push(pair_info(&frame, a, b, self.exact_offsets));
+            p.eps
+                .push(crate::pack::round_up(a.eps as f64 + b.eps as f64));
             p.frames.push(frame);
             p.tris.push((a.mesh.clone(), b.mesh.clone()));
             p.levels = p.levels.max(a.depth.max(b.depth));
@@ -961,7 +972,7 @@ impl GpuContext {
         } else {
             self.queue
                 .write_buffer(&bufs.pairs, 0, bytemuck::cast_slice(&p.infos));
-            write_poses(&self.queue, &bufs.poses, &p.infos);
+            write_poses(&self.queue, &bufs.poses, &p.infos, &p.eps);
             let roots: Vec<[u32; 4]> = (0..n).map(|k| [k, 0, 0, 0]).collect();
             self.queue
                 .write_buffer(&bufs.frontier[0], 0, bytemuck::cast_slice(&roots));
@@ -1198,6 +1209,7 @@ mod tests {
         let frame = RelativeFrame::new(&Pose::IDENTITY, &Pose::IDENTITY);
         Prepared {
             infos: Vec::new(),
+            eps: Vec::new(),
             frames: vec![frame, frame],
             tris: vec![(a.clone(), b.clone()), (a, b)],
             levels: 0,
@@ -1306,6 +1318,7 @@ mod tests {
         let frame = RelativeFrame::new(&Pose::IDENTITY, &Pose::IDENTITY);
         let p = Prepared {
             infos: Vec::new(),
+            eps: Vec::new(),
             frames: vec![frame; 4],
             tris: vec![(a, b); 4],
             levels: 0,
