@@ -14,7 +14,7 @@ const WG: u32 = 64u;
 @group(0) @binding(1) var<storage, read_write> args: array<u32, 3>;
 @group(0) @binding(2) var<uniform> params: Params;
 
-// Indirect arguments for `m` frontier entries: ceil(m / WG) workgroups as an x × y grid.
+// Indirect arguments for `m` invocations: ceil(m / WG) workgroups as an x × y grid.
 fn set_args(m: u32) {
     let groups = (m + WG - 1u) / WG;
     let x = min(groups, params.caps.z);
@@ -27,8 +27,9 @@ fn set_args(m: u32) {
     args[2] = 1u;
 }
 
-// The CPU wrote the batch's root pairs (k, 0, 0) into frontier 0 (at most its capacity), and
-// (1, 1, 1) into the indirect arguments of levels 1 and 2 (`traverse` raises them).
+// The CPU wrote the batch's root pairs (k, ONE_NODE | 0, ONE_NODE | 0) into frontier 0 (at most
+// its capacity), and (1, 1, 1) into the indirect arguments of levels 1 and 2 (`traverse` raises
+// them). A level runs four invocations per entry (`traverse`).
 @compute @workgroup_size(1)
 fn init() {
     let n = params.caps.w;
@@ -41,7 +42,7 @@ fn init() {
     atomicStore(&state.needed, n);
     state.levels = 0u;
     state.pairs_tested = 0u;
-    set_args(m);
+    set_args(4u * m);
 }
 
 // After the last level: one invocation per listed triangle pair (at most the list's capacity;

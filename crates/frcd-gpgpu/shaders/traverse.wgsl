@@ -16,9 +16,10 @@
 // f32 words as bits; triangles rgba32float; one texel = 4 words), each tree in its own local
 // frame, at the item offsets of its pair entry:
 //   node i: 4 texels (64 bytes) (c.xyz, link) (a0.xyz, h0 | leaf) (a1.xyz, h1) (a2.xyz, h2):
-//   link = the right child (internal; the left child is i + 1) or first | (count - 1) << 24
-//   (leaf); leaf = bit 31 of h0's word (a sign bit: h0 >= 0). The axes' bound eps (see
-//   `obb_overlap`) is one per mesh, the pair's sum in the pose texture.
+//   link = the first child (internal; nodes are breadth first with siblings side by side, the
+//   second child is link + 1) or first | (count - 1) << 24 (leaf); leaf = bit 31 of h0's word
+//   (a sign bit: h0 >= 0). The axes' bound eps (see `obb_overlap`) is one per mesh, the pair's
+//   sum in the pose texture.
 //   triangle j (leaf order): 3 texels (o0.xyz, mesh index) (o1.xyz, k1) (o2.xyz, k2): the
 //   vertices' offsets o = v - c from a reference point c = k 2^e on the mesh's power-of-two grid
 //   (k an integer vector, |k_i| <= 2^13, packed into k1 and k2; e per mesh, in PairInfo.fix);
@@ -67,7 +68,10 @@ override EXACT_PATH: bool = true;
 @group(0) @binding(2) var<uniform> arena: Arena;
 
 // `traverse`: this level's frontier (binding 0), the next level's (binding 1), both entries
-// (pair, node of A, node of B, unused), and the triangle list it appends to (binding 3),
+// (pair, children of A, children of B, unused): each names a pair of overlapping internal
+// nodes by their first children (`link`), or a node itself with ONE_NODE set (a leaf, or a
+// root); the level runs four invocations per entry, one per child pair. Then the triangle
+// list it appends to (binding 3),
 // entries (pair, triangle of A, triangle of B, unused), triangles in leaf order relative to each
 // mesh's first triangle.
 // `triangles` (same layout, other buffers): the triangle list (binding 0) and the output
@@ -103,6 +107,8 @@ var<private> pose: PairInfo;
 var<private> pose_eps: f32;
 
 const LEAF_FLAG: u32 = 0x80000000u;
+// Bit 31 of a frontier entry's node word: the word is that node itself, not its first child.
+const ONE_NODE: u32 = 0x80000000u;
 
 struct Node {
     c: vec3<f32>,
@@ -111,8 +117,8 @@ struct Node {
     a2: vec3<f32>,
     h: vec3<f32>,
     leaf: bool,
-    // Internal: the right child. Leaf: first triangle and count.
-    right: u32,
+    // Internal: the first child (the second is the next node). Leaf: first triangle and count.
+    first_child: u32,
     first: u32,
     count: u32,
 }
@@ -148,7 +154,7 @@ fn load_node(i: u32) -> Node {
     n.a2 = bitcast<vec3<f32>>(t3.xyz);
     n.h = bitcast<vec3<f32>>(vec3<u32>(t1.w & ~LEAF_FLAG, t2.w, t3.w));
     n.leaf = (t1.w & LEAF_FLAG) != 0u;
-    n.right = t0.w;
+    n.first_child = t0.w;
     n.first = t0.w & 0xffffffu;
     n.count = select(0u, (t0.w >> 24u) + 1u, n.leaf);
     return n;
@@ -586,7 +592,8 @@ fn leaf_pair(p: u32, na: Node, nb: Node) {
     }
 }
 
-// The x extent of the grid `control.wgsl`'s `set_args` made for `m` entries (the same formula):
+// The x extent of the grid `control.wgsl`'s `set_args` made for `m` invocations (the same
+// formula):
 // read from the counts rather than `@builtin(num_workgroups)`, which D3D12 reports as 0 when
 // wgpu's indirect-call validation is off (frcd-gpgpu's own instances turn it off).
 fn grid_x(m: u32) -> u32 {
@@ -594,19 +601,20 @@ fn grid_x(m: u32) -> u32 {
 }
 
 // The next level's indirect arguments, raised to cover entries [base, base + k) of its
-// frontier (at most the capacity): ceil(m / WG) workgroups as `control.wgsl`'s `set_args` lays
-// them out, x = min(groups, caps.z) and y = ceil(groups / caps.z), both non-decreasing in m, so
-// the largest raise is the arguments of the final size. Only the append that opens a new
-// workgroup raises them (one append in WG / k), so the atomics stay few. An append past the
-// capacity also records the size asked for (`needed`).
+// frontier (at most the capacity), four invocations each: ceil(4 m / WG) workgroups as
+// `control.wgsl`'s `set_args` lays them out, x = min(groups, caps.z) and y = ceil(groups /
+// caps.z), both non-decreasing in m, so the largest raise is the arguments of the final size.
+// Only the append that opens a new workgroup raises them (one append in WG / 4), so the
+// atomics stay few. An append past the capacity also records the size asked for (`needed`).
 fn append_args(base: u32, k: u32) {
     let cap = params.caps.x;
     let end = base + k;
     if end > cap {
         atomicMax(&state.needed, end);
     }
-    let before = (min(base, cap) + WG - 1u) / WG;
-    let groups = (min(end, cap) + WG - 1u) / WG;
+    // Four invocations per entry (16 entries per workgroup).
+    let before = (min(base, cap) * 4u + WG - 1u) / WG;
+    let groups = (min(end, cap) * 4u + WG - 1u) / WG;
     if groups > before {
         atomicMax(&args_next[0], min(groups, params.caps.z));
         atomicMax(&args_next[1], (groups + params.caps.z - 1u) / params.caps.z);
@@ -667,54 +675,47 @@ fn traverse(@builtin(workgroup_id) wid: vec3<u32>,
         args_after[2] = 1u;
         if cur > 0u {
             state.levels += 1u;
+            // Entries; the CPU counts four slots per entry (those of a single node's missing
+            // children return untested).
             state.pairs_tested += cur;
         }
     }
-    let idx = (wid.y * grid_x(cur) + wid.x) * WG + lid;
-    if idx >= cur {
+    // One invocation per child pair of an entry: child j & 1 of A's, j >> 1 of B's.
+    let slots = 4u * cur;
+    let idx = (wid.y * grid_x(slots) + wid.x) * WG + lid;
+    if idx >= slots {
         return;
     }
-    let entry = frontier_in[idx];
+    let entry = frontier_in[idx >> 2u];
+    let j = idx & 3u;
+    let one_a = (entry.y & ONE_NODE) != 0u;
+    let one_b = (entry.z & ONE_NODE) != 0u;
+    if (one_a && (j & 1u) != 0u) || (one_b && j >= 2u) {
+        return;
+    }
+    // Node indices in the frontier are relative to each mesh's first node.
+    let ia = (entry.y & ~ONE_NODE) + (j & 1u);
+    let ib = (entry.z & ~ONE_NODE) + (j >> 1u);
     // Only the f32 pose and the bases (the exact path's words are the triangle pass's).
     load_pose(entry.x);
-    // Node indices in the frontier are relative to each mesh's first node.
-    let pair = entry.yz;
-    let na = load_node(pose.base.x + pair.x);
-    let nb = load_node(pose.base.z + pair.y);
+    let na = load_node(pose.base.x + ia);
+    let nb = load_node(pose.base.z + ib);
     if !obb_overlap(na, nb, pose_eps) {
         return;
     }
-    let a_leaf = na.leaf;
-    let b_leaf = nb.leaf;
-    if a_leaf && b_leaf {
+    if na.leaf && nb.leaf {
         leaf_pair(entry.x, na, nb);
         return;
     }
-    // Descend both trees at once where both are internal: the pair tree's depth is then the
-    // deeper of the two trees, which bounds the number of levels recorded on the CPU.
-    var ca = vec2<u32>(pair.x, pair.x);
-    var nca = 1u;
-    if !a_leaf {
-        ca = vec2<u32>(pair.x + 1u, na.right);
-        nca = 2u;
-    }
-    var cb = vec2<u32>(pair.y, pair.y);
-    var ncb = 1u;
-    if !b_leaf {
-        cb = vec2<u32>(pair.y + 1u, nb.right);
-        ncb = 2u;
-    }
-    let k = nca * ncb;
-    let base = atomicAdd(&state.counts[level.slots.y], k);
-    append_args(base, k);
+    // Descend both trees at once where both are internal (a leaf stays as it is): the pair
+    // tree's depth is then the deeper of the two trees, which bounds the number of levels
+    // recorded on the CPU. One entry names all (up to four) child pairs.
+    let ea = select(na.first_child, ia | ONE_NODE, na.leaf);
+    let eb = select(nb.first_child, ib | ONE_NODE, nb.leaf);
+    let base = atomicAdd(&state.counts[level.slots.y], 1u);
+    append_args(base, 1u);
     // Past capacity nothing is written; the CPU sees `needed` above the capacity and re-runs.
-    if base + k <= params.caps.x {
-        var w = base;
-        for (var i = 0u; i < nca; i++) {
-            for (var j = 0u; j < ncb; j++) {
-                frontier_out[w] = vec4<u32>(entry.x, ca[i], cb[j], 0u);
-                w++;
-            }
-        }
+    if base < params.caps.x {
+        frontier_out[base] = vec4<u32>(entry.x, ea, eb, 0u);
     }
 }

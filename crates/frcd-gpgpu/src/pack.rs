@@ -9,7 +9,8 @@
 //! | node | `(c, link) (a0, h0 \| leaf) (a1, h1) (a2, h2)`: f32 bits, 64 bytes (one cache line) |
 //! | triangle (leaf order) | `(o0, mesh index) (o1, k word 1) (o2, k word 2)` |
 //!
-//! A node's `link` is its right child (internal; the left is the next node) or, for a leaf,
+//! Nodes are in breadth-first order with siblings side by side ([`sibling_order`]): an internal
+//! node's `link` is its first child (the second is the next slot), a leaf's
 //! `first | (count - 1) << 24`; bit 31 of `h0`'s word (a sign bit, `h0 >= 0`) marks a leaf
 //! ([`node_texels_of`]). The axes' deviation from orthonormal is one bound per mesh
 //! ([`PackedTree::eps`], the largest of its nodes'), which the pair's pose carries to the shader.
@@ -362,8 +363,37 @@ pub fn obb_to_f32(obb: &Obb, node: usize) -> Result<ObbF32, GpuError> {
     })
 }
 
+/// The GPU's node order: breadth first, the two children of a node side by side. Returns the
+/// tree's node index at each slot and, per slot, the slot of its first child (0 for a leaf).
+/// A node reached twice is an error (the tree's links checked by the caller only bound them).
+pub fn sibling_order(tree: &ObbTree) -> Result<(Vec<usize>, Vec<u32>), GpuError> {
+    let n = tree.node_count();
+    let mut order = Vec::with_capacity(n);
+    let mut first_child = Vec::with_capacity(n);
+    order.push(0usize);
+    let mut k = 0;
+    while k < order.len() {
+        let node = tree.node(order[k] as u32);
+        if node.is_leaf() {
+            first_child.push(0);
+        } else {
+            if order.len() + 2 > n {
+                return Err(GpuError::InvalidInput(
+                    "OBB tree: a node is the child of two nodes".into(),
+                ));
+            }
+            first_child.push(order.len() as u32);
+            order.push(order[k] + 1);
+            order.push(node.right as usize);
+        }
+        k += 1;
+    }
+    Ok((order, first_child))
+}
+
 /// A node's four texels as `traverse.wgsl`'s `load_node` reads them: `(c, link) (a0, h0 | leaf)
-/// (a1, h1) (a2, h2)`, f32 bits. `link` is the right child of an internal node, or a leaf's
+/// (a1, h1) (a2, h2)`, f32 bits. `link` is the first child of an internal node (the second is
+/// the next slot, see [`sibling_order`]), or a leaf's
 /// `first | (count - 1) << 24` (`first < 2^24`, `1 <= count <= 256`, checked by the caller);
 /// `leaf` sets bit 31 of `h0`'s word, whose sign bit is free (`h0 >= 0`).
 pub fn node_texels_of(b: &ObbF32, link: u32, leaf: bool) -> [[u32; 4]; 4] {
@@ -484,15 +514,21 @@ fn pack_into(
                 "OBB node {i}: child or triangle range out of bounds"
             )));
         }
+    }
+    // Siblings side by side (breadth first): a node's children are `link` and `link + 1`, so a
+    // traversal entry names both children of each node with one index.
+    let (bfs, first_child) = sibling_order(tree)?;
+    for (slot, &i) in bfs.iter().enumerate() {
+        let n = &nodes[i];
         let b = obb_to_f32(&n.obb, i)?;
         eps = eps.max(b.axes_deviation());
         let link = if n.is_leaf() {
             n.first | (n.count - 1) << 24
         } else {
-            n.right
+            first_child[slot]
         };
         for (k, texel) in node_texels_of(&b, link, n.is_leaf()).into_iter().enumerate() {
-            node_texels[node_layout.linear(i as u32, k as u32)] = texel;
+            node_texels[node_layout.linear(slot as u32, k as u32)] = texel;
         }
     }
     let grid = grid_exponent(tree)?;
@@ -856,9 +892,16 @@ mod tests {
         let p = pack_tree(&tree, &limits).unwrap();
         assert!(p.node_layout.layers > 1 && p.tri_layout.layers > 1);
         let mut eps = 0f32;
+        let (bfs, _) = sibling_order(&tree).unwrap();
+        let mut slot_of = vec![usize::MAX; bfs.len()];
+        for (slot, &i) in bfs.iter().enumerate() {
+            slot_of[i] = slot;
+        }
+        assert!(slot_of.iter().all(|&s| s != usize::MAX), "every node has a slot");
         for (i, n) in tree.nodes().iter().enumerate() {
+            let slot = slot_of[i] as u32;
             let t: [[u32; 4]; 4] =
-                std::array::from_fn(|k| p.nodes[p.node_layout.linear(i as u32, k as u32)]);
+                std::array::from_fn(|k| p.nodes[p.node_layout.linear(slot, k as u32)]);
             let b = obb_to_f32(&n.obb, i).unwrap();
             eps = eps.max(b.axes_deviation());
             let f = |x: u32| f32::from_bits(x);
@@ -872,7 +915,9 @@ mod tests {
                 assert_eq!(t[0][3] & 0xff_ffff, n.first);
                 assert_eq!((t[0][3] >> 24) + 1, n.count);
             } else {
-                assert_eq!(t[0][3], n.right);
+                // The children side by side, in the tree's order (left, then right).
+                assert_eq!(bfs[t[0][3] as usize], i + 1, "node {i}'s first child");
+                assert_eq!(bfs[t[0][3] as usize + 1], n.right as usize, "node {i}'s second");
             }
         }
         assert_eq!(p.eps, eps);

@@ -5,6 +5,9 @@ use frcd_obb::RelativeFrame;
 use frcd_tritri::Method;
 use std::sync::Arc;
 
+/// Bit 31 of a frontier entry's node word: the node itself, not its first child
+/// (`traverse.wgsl`).
+const ONE_NODE: u32 = 0x8000_0000;
 /// Bit 31 of an output entry's third word: the GPU could not decide the pair.
 const UNCERTAIN_FLAG: u32 = 0x8000_0000;
 /// Bytes of the `State` struct shared with the shaders (prelude).
@@ -53,7 +56,9 @@ pub struct GpuCollision {
     /// pair's integer ranges cannot hold: A's mesh below the grid's range, A's grid more than
     /// 2^46 below B's, or a translation too large).
     pub exact_offsets: bool,
-    /// Node pairs the GPU tested (separating-axis tests), for the whole batch.
+    /// Node pairs the GPU's traversal took up, for the whole batch: four per frontier entry,
+    /// the child pairs of a pair of overlapping nodes (a leaf has no second child: those
+    /// slots return without a separating-axis test, and are counted).
     pub node_pairs_tested: u64,
     /// Traversal levels that had work, for the whole batch.
     pub levels: u32,
@@ -80,7 +85,7 @@ impl GpuCollision {
 pub struct GpuBatch {
     /// One answer per body pair, in input order.
     pub results: Vec<GpuCollision>,
-    /// Node pairs the GPU tested.
+    /// Node pairs the GPU's traversal took up (see [`GpuCollision::node_pairs_tested`]).
     pub node_pairs_tested: u64,
     /// Traversal levels that had work.
     pub levels: u32,
@@ -258,7 +263,8 @@ impl QueryScratch {
         // argument within the device's limits (the context skips wgpu's validation of them);
         // `run` refuses a batch that needs more.
         let most = dispatchable(ctx);
-        self.frontier_cap = self.frontier_cap.min(most);
+        // A level runs four invocations per frontier entry.
+        self.frontier_cap = self.frontier_cap.min(most / 4);
         self.tri_cap = self.tri_cap.min(most);
         let fsize = self.frontier_cap as u64 * ENTRY_BYTES;
         let osize = self.output_cap as u64 * ENTRY_BYTES;
@@ -973,7 +979,8 @@ impl GpuContext {
             self.queue
                 .write_buffer(&bufs.pairs, 0, bytemuck::cast_slice(&p.infos));
             write_poses(&self.queue, &bufs.poses, &p.infos, &p.eps);
-            let roots: Vec<[u32; 4]> = (0..n).map(|k| [k, 0, 0, 0]).collect();
+            // Each root as itself (bit 31: the node, not its first child; `traverse.wgsl`).
+            let roots: Vec<[u32; 4]> = (0..n).map(|k| [k, ONE_NODE, ONE_NODE, 0]).collect();
             self.queue
                 .write_buffer(&bufs.frontier[0], 0, bytemuck::cast_slice(&roots));
         }
@@ -1094,21 +1101,23 @@ impl GpuContext {
             let (out_count, needed) = (state.out, state.needed);
             let mut rerun = false;
             let most = dispatchable(self);
-            for (what, count) in [
+            for (what, count, limit) in [
                 (
-                    "node pairs one level lists (workgroups per dimension squared × 64)",
+                    "node pairs one level lists (workgroups per dimension squared × 16)",
                     needed,
+                    most / 4,
                 ),
                 (
                     "triangle pairs one batch lists (workgroups per dimension squared × 64)",
                     state.tris,
+                    most,
                 ),
             ] {
-                if count > most {
+                if count > limit {
                     return Err(GpuError::CapacityExceeded {
                         what,
                         needed: count as u64,
-                        limit: most as u64,
+                        limit: limit as u64,
                     });
                 }
             }
@@ -1147,7 +1156,8 @@ impl GpuContext {
                 )));
             }
             answer.levels = state.levels;
-            answer.node_pairs_tested = state.pairs_tested as u64;
+            // Four slots per frontier entry (`traverse.wgsl`).
+            answer.node_pairs_tested = 4 * state.pairs_tested as u64;
             break (state, ticks, entries);
         };
         debug_assert_eq!(entries.len(), state.out as usize * 4);
