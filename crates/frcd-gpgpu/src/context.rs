@@ -34,8 +34,8 @@ pub fn requirements() -> wgpu::Limits {
         max_compute_workgroup_storage_size: BOX_TILE * 64,
         max_compute_workgroup_size_z: 1,
         max_compute_workgroups_per_dimension: 1,
-        // The pose texture's rows are 2,048 texels (512 pairs of four; WebGPU's and WebGL 2's
-        // minimum); the arena needs one node (5 texels) per row at least.
+        // The pose texture's rows are 1,280 texels (256 pairs of five; asked as WebGL 2's
+        // minimum, 2,048); the arena needs one node (4 texels) per row at least.
         max_texture_dimension_2d: 2048,
         // Two layers at least (wgpu's GL backend, see `pack::MIN_LAYERS`).
         max_texture_array_layers: 2,

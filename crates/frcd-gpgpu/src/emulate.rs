@@ -1045,7 +1045,11 @@ mod tests {
     /// The mesh's axes' bound, as `pack::PackedTree::eps` (the largest of its nodes').
     fn mesh_eps(tree: &ObbTree) -> f32 {
         (0..tree.node_count())
-            .map(|k| obb_to_f32(&tree.node(k as u32).obb, k).unwrap().axes_deviation())
+            .map(|k| {
+                obb_to_f32(&tree.node(k as u32).obb, k)
+                    .unwrap()
+                    .axes_deviation()
+            })
             .fold(0f32, f32::max)
     }
 

@@ -27,7 +27,9 @@
 //!   (the hybrid scheduler's rough colliding set) by sort-based sweep and prune in
 //!   O(n log n + pairs): a bitonic sort of the box minima on the axis of largest spread, then
 //!   each box scans forward while the next minimum is within its maximum. Equal to the f64
-//!   all-pairs answer ([`GpuContext::overlapping_bodies_all_pairs`] is the O(n²) form).
+//!   all-pairs answer ([`GpuContext::overlapping_bodies_all_pairs`] is the O(n²) form, one
+//!   dispatch, faster for few bodies: [`GpuContext::broad_phase`] takes it up to
+//!   [`ALL_PAIRS_MAX_BODIES`] bodies and the sweep above).
 //!
 //! Numbers: the GPU computes in f32 relative to each body's local origin (triangles relative to
 //! grid reference points, whose offset the triangle pass can compute exactly in integers: see

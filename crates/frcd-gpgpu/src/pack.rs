@@ -195,7 +195,7 @@ pub struct TexLimits {
 /// A tree packed into texel arrays, ready to upload.
 #[derive(Clone, Debug)]
 pub struct PackedTree {
-    /// Node texels as words (layout [`PackedTree::node_layout`]; see [`node_texels`]).
+    /// Node texels as words (layout [`PackedTree::node_layout`]; see [`node_texels_of`]).
     pub nodes: Vec<[u32; 4]>,
     /// The largest of the nodes' [`ObbF32::axes_deviation`]: the mesh's bound on its f32 axes'
     /// distance to an orthonormal frame.
@@ -527,7 +527,10 @@ fn pack_into(
         } else {
             first_child[slot]
         };
-        for (k, texel) in node_texels_of(&b, link, n.is_leaf()).into_iter().enumerate() {
+        for (k, texel) in node_texels_of(&b, link, n.is_leaf())
+            .into_iter()
+            .enumerate()
+        {
             node_texels[node_layout.linear(slot as u32, k as u32)] = texel;
         }
     }
@@ -897,7 +900,10 @@ mod tests {
         for (slot, &i) in bfs.iter().enumerate() {
             slot_of[i] = slot;
         }
-        assert!(slot_of.iter().all(|&s| s != usize::MAX), "every node has a slot");
+        assert!(
+            slot_of.iter().all(|&s| s != usize::MAX),
+            "every node has a slot"
+        );
         for (i, n) in tree.nodes().iter().enumerate() {
             let slot = slot_of[i] as u32;
             let t: [[u32; 4]; 4] =
@@ -917,7 +923,11 @@ mod tests {
             } else {
                 // The children side by side, in the tree's order (left, then right).
                 assert_eq!(bfs[t[0][3] as usize], i + 1, "node {i}'s first child");
-                assert_eq!(bfs[t[0][3] as usize + 1], n.right as usize, "node {i}'s second");
+                assert_eq!(
+                    bfs[t[0][3] as usize + 1],
+                    n.right as usize,
+                    "node {i}'s second"
+                );
             }
         }
         assert_eq!(p.eps, eps);
