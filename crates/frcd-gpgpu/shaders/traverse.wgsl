@@ -1,10 +1,11 @@
 // frcd-gpgpu: one level of the breadth-first traversal of the pair trees of a whole batch of
 // body pairs (one frame: every candidate pair in one dispatch chain).
 //
-// Each invocation takes one (pair, node of A, node of B) entry from the current frontier and runs
-// the separating-axis test in f32 with a computed error bound, so rounding can only keep a pair,
-// never drop one. Overlapping internal pairs append their child pairs to the next frontier
-// (atomic compaction); overlapping leaf pairs append every triangle pair of the two leaves to
+// Each invocation takes one node pair (one of the up to four child pairs a frontier entry names)
+// and runs the separating-axis test in f32 with a computed error bound, so rounding can only keep
+// a pair, never drop one. Overlapping pairs with an internal node append one entry naming their
+// children to the next frontier (atomic compaction); overlapping leaf pairs append every
+// triangle pair of the two leaves to
 // the triangle list. After the last level, `triangles` runs the triangle test (Guigue-Devillers
 // orientation form) once per listed pair, one pair per invocation (the tests of a leaf pair no
 // longer run as a loop in the few lanes that reached a leaf: a SIMD driver such as llvmpipe
@@ -196,7 +197,7 @@ fn maxabs(v: vec3<f32>) -> f32 {
 //
 // Error bound (valid for any rounding direction, FMA contraction and flush-to-zero; U, TAU as
 // above). The boxes are the f32 parallelepipeds {c + sum s_i h_i a_i}; their axes are only
-// near-orthonormal: the CPU stores in (c, w) an eps_A >= max_i |a_i - q_i|_2 for an orthonormal
+// near-orthonormal: the CPU computes an eps_A >= max_i |a_i - q_i|_2 for an orthonormal
 // Q_A (3 max|A^T A - I|, via the polar factor; see `pack::ObbF32::axes_deviation`; one bound per
 // mesh, the largest of its nodes', as err only grows with it; the pair's eps_A + eps_B comes
 // rounded up from the CPU in `pose_eps`). Box A lies in
