@@ -1344,3 +1344,43 @@ fn contexts_created_and_dropped_on_many_threads() {
         }
     });
 }
+
+/// More body pairs than the device's pose texture holds (256 pairs a row, as many rows as its
+/// 2D textures allow): a typed error before any GPU work, naming the limit.
+#[test]
+fn batches_beyond_the_pose_texture_are_a_typed_error() {
+    use frcd_gpgpu::wgpu;
+    let Some((adapter, device, queue)) = adapter_and_device_on(
+        wgpu::InstanceDescriptor::new_without_display_handle_from_env(),
+        |l| wgpu::Limits {
+            max_texture_dimension_2d: 2048,
+            ..l
+        },
+    ) else {
+        return;
+    };
+    let ctx = GpuContext::from_adapter(&adapter, device, queue).expect("limits suffice");
+    let a = body(&ctx, shapes::icosphere(1.0, 1));
+    let (pa, pb) = (Pose::IDENTITY, Pose::from_translation(DVec3::X));
+    let most = 256 * 2048;
+    let batch = vec![(&a.gpu, &pa, &a.gpu, &pb); most];
+    let before = ctx.submissions();
+    match ctx.collide_batch(&batch, &mut QueryScratch::default()) {
+        Err(GpuError::CapacityExceeded {
+            what,
+            needed,
+            limit,
+        }) => {
+            assert_eq!(what, "body pairs in one batch");
+            assert_eq!((needed, limit), (most as u64, most as u64 - 1));
+        }
+        other => panic!("expected CapacityExceeded, got {other:?}"),
+    }
+    assert_eq!(ctx.submissions(), before, "nothing submitted");
+    // The context is unharmed: a small batch still answers.
+    let small = ctx
+        .collide_batch(&batch[..3], &mut QueryScratch::default())
+        .unwrap();
+    let want = oracle::pairs(&a.mesh, &pa, &a.mesh, &pb);
+    assert!(small.results.iter().all(|r| r.pairs == want));
+}
