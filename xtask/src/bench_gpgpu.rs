@@ -318,9 +318,10 @@ struct PairRow {
 struct FrameRow {
     parts: usize,
     triangles: usize,
-    candidates: usize,
-    touching_bodies: usize,
-    touching: usize,
+    /// Per frame, averaged over the frames (a count below one frame's worth is not 0).
+    candidates: f64,
+    touching_bodies: f64,
+    touching: f64,
     cpu1: f64,
     cpu_all: f64,
     gpu: f64,
@@ -670,9 +671,9 @@ pub fn run(mut o: Opts) -> Result<()> {
         frame_rows.push(FrameRow {
             parts: n,
             triangles,
-            candidates: candidates / nf,
-            touching_bodies: touching_bodies / nf,
-            touching: touching / nf,
+            candidates: candidates as f64 / nf as f64,
+            touching_bodies: touching_bodies as f64 / nf as f64,
+            touching: touching as f64 / nf as f64,
             cpu1,
             cpu_all,
             gpu,
@@ -871,7 +872,7 @@ pub fn run(mut o: Opts) -> Result<()> {
         for r in &frame_rows {
             writeln!(
                 md,
-                "| {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} |",
+                "| {} | {} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} |",
                 r.parts,
                 r.triangles,
                 r.candidates,
