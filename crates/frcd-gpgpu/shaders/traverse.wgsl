@@ -162,8 +162,9 @@ fn load_node(i: u32) -> Node {
 }
 
 // Fills `pose`'s f32 pose and bases for pair p from `poses` (the exact path's words are read
-// from `pairs` by the triangle pass). A bit cast is exact; a subnormal word a driver flushes
-// when it computes with it is inside the TAU terms of every bound.
+// from `pairs` by the triangle pass; the axes' bound by `load_pose_eps`). A bit cast is exact;
+// a subnormal word a driver flushes when it computes with it is inside the TAU terms of every
+// bound.
 fn load_pose(p: u32) {
     let col = (p & 255u) * 5u;
     let row = p >> 8u;
@@ -175,7 +176,11 @@ fn load_pose(p: u32) {
     pose.r2 = vec4<f32>(bitcast<vec3<f32>>(w2.xyz), 0.0);
     pose.t = vec4<f32>(bitcast<f32>(w0.w), bitcast<f32>(w1.w), bitcast<f32>(w2.w), 0.0);
     pose.base = textureLoad(poses, vec2<u32>(col + 3u, row), 0);
-    pose_eps = bitcast<f32>(textureLoad(poses, vec2<u32>(col + 4u, row), 0).x);
+}
+
+// `pose_eps` for pair p (its fifth pose texel; only the box test needs it).
+fn load_pose_eps(p: u32) {
+    pose_eps = bitcast<f32>(textureLoad(poses, vec2<u32>((p & 255u) * 5u + 4u, p >> 8u), 0).x);
 }
 
 fn rot(v: vec3<f32>) -> vec3<f32> {
@@ -697,8 +702,10 @@ fn traverse(@builtin(workgroup_id) wid: vec3<u32>,
     // Node indices in the frontier are relative to each mesh's first node.
     let ia = (entry.y & ~ONE_NODE) + (j & 1u);
     let ib = (entry.z & ~ONE_NODE) + (j >> 1u);
-    // Only the f32 pose and the bases (the exact path's words are the triangle pass's).
+    // Only the f32 pose, the bases and the axes' bound (the exact path's words are the
+    // triangle pass's).
     load_pose(entry.x);
+    load_pose_eps(entry.x);
     let na = load_node(pose.base.x + ia);
     let nb = load_node(pose.base.z + ib);
     if !obb_overlap(na, nb, pose_eps) {

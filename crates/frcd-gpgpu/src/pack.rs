@@ -365,26 +365,41 @@ pub fn obb_to_f32(obb: &Obb, node: usize) -> Result<ObbF32, GpuError> {
 
 /// The GPU's node order: breadth first, the two children of a node side by side. Returns the
 /// tree's node index at each slot and, per slot, the slot of its first child (0 for a leaf).
-/// A node reached twice is an error (the tree's links checked by the caller only bound them).
+/// A node reached twice, or a child index out of range, is an error.
 pub fn sibling_order(tree: &ObbTree) -> Result<(Vec<usize>, Vec<u32>), GpuError> {
-    let n = tree.node_count();
+    sibling_order_of(tree.node_count(), |i| {
+        let node = tree.node(i as u32);
+        (!node.is_leaf()).then(|| (i + 1, node.right as usize))
+    })
+}
+
+/// [`sibling_order`] over `n` nodes whose internal ones have the children `children(i)`.
+fn sibling_order_of(
+    n: usize,
+    children: impl Fn(usize) -> Option<(usize, usize)>,
+) -> Result<(Vec<usize>, Vec<u32>), GpuError> {
     let mut order = Vec::with_capacity(n);
     let mut first_child = Vec::with_capacity(n);
-    order.push(0usize);
+    let mut seen = vec![false; n];
+    let mut visit = |i: usize, order: &mut Vec<usize>| {
+        if i >= n || std::mem::replace(&mut seen[i], true) {
+            return Err(GpuError::InvalidInput(format!(
+                "OBB tree: node {i} is out of range or the child of two nodes"
+            )));
+        }
+        order.push(i);
+        Ok(())
+    };
+    visit(0, &mut order)?;
     let mut k = 0;
     while k < order.len() {
-        let node = tree.node(order[k] as u32);
-        if node.is_leaf() {
-            first_child.push(0);
-        } else {
-            if order.len() + 2 > n {
-                return Err(GpuError::InvalidInput(
-                    "OBB tree: a node is the child of two nodes".into(),
-                ));
+        match children(order[k]) {
+            None => first_child.push(0),
+            Some((left, right)) => {
+                first_child.push(order.len() as u32);
+                visit(left, &mut order)?;
+                visit(right, &mut order)?;
             }
-            first_child.push(order.len() as u32);
-            order.push(order[k] + 1);
-            order.push(node.right as usize);
         }
         k += 1;
     }
@@ -881,6 +896,34 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn sibling_order_puts_children_side_by_side_and_refuses_shared_or_missing_ones() {
+        // 0 -> (1, 4); 1 -> (2, 3): breadth first 0, 1, 4, 2, 3.
+        let tree = |i: usize| match i {
+            0 => Some((1, 4)),
+            1 => Some((2, 3)),
+            _ => None,
+        };
+        let (order, first) = sibling_order_of(5, tree).unwrap();
+        assert_eq!(order, vec![0, 1, 4, 2, 3]);
+        assert_eq!(first, vec![1, 3, 0, 0, 0]);
+        // Node 2 is both 0's right child and 1's left child.
+        let shared = |i: usize| match i {
+            0 => Some((1, 2)),
+            1 => Some((2, 3)),
+            _ => None,
+        };
+        assert!(matches!(
+            sibling_order_of(4, shared),
+            Err(GpuError::InvalidInput(m)) if m.contains("node 2")
+        ));
+        let missing = |i: usize| (i == 0).then_some((1, 7));
+        assert!(matches!(
+            sibling_order_of(3, missing),
+            Err(GpuError::InvalidInput(m)) if m.contains("node 7")
+        ));
     }
 
     #[test]

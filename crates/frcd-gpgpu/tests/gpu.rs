@@ -46,6 +46,16 @@ fn tree(mesh: &TriMesh) -> ObbTree {
     ObbTree::build(mesh, &BuildOptions::default())
 }
 
+/// A random unit axis (Z for the rare near-zero draw).
+fn random_axis(rng: &mut StdRng) -> DVec3 {
+    DVec3::new(
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+    )
+    .normalize_or(DVec3::Z)
+}
+
 struct Body {
     mesh: TriMesh,
     gpu: GpuMesh,
@@ -446,12 +456,7 @@ fn a_frame_of_many_pairs_is_one_submission() {
     let mut rng = StdRng::seed_from_u64(99);
     let poses: Vec<Pose> = (0..24)
         .map(|_| {
-            let axis = DVec3::new(
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-            )
-            .normalize_or(DVec3::Z);
+            let axis = random_axis(&mut rng);
             Pose::new(
                 DVec3::new(
                     rng.random_range(-1.5..1.5),
@@ -511,12 +516,7 @@ fn batches_spanning_several_pose_rows_equal_the_oracle() {
     let n = 1300;
     let poses: Vec<(Pose, Pose)> = (0..n)
         .map(|k| {
-            let axis = DVec3::new(
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-            )
-            .normalize_or(DVec3::Z);
+            let axis = random_axis(&mut rng);
             // Centres 1.4-2.6 apart: some pairs touch, some do not.
             let d = 1.4 + 1.2 * ((k * 37) % 100) as f64 / 100.0;
             (
