@@ -14,6 +14,9 @@
 //   sweep:       sorted box p scans q = p+1, p+2, .. while outer lo.x of q <= outer hi.x of p,
 //                testing the outer boxes on all three axes; each pair is found once, by the
 //                earlier box in sorted order. Output and the "uncertain" flag as in boxes.wgsl.
+//                A round scans at most SWEEP_STEP candidates per box (see there): round r
+//                (params.n.w) scans q from p + 1 + r SWEEP_STEP on, and a scan cut off by the
+//                window sets count[1], so that the host runs round r + 1.
 //
 // Keys compare (key, index) lexicographically, so the order depends on the boxes only. The key
 // order agrees with f32 order (-0 and +0 are equal floats with adjacent keys), so once the scan
@@ -27,13 +30,21 @@ const PAD_KEY: u32 = 0xffffffffu;
 // Workgroup size; BLOCK keys per workgroup in sort_local (must match sweep.rs).
 const WG: u32 = 64u;
 const BLOCK: u32 = 128u;
+// Candidates one invocation scans per round. llvmpipe (Mesa's gallivm, the software driver)
+// ends every loop of a shader invocation once all its loops together have run 65,535
+// iterations (LP_MAX_TGSI_LOOP_ITERATIONS), silently: one box whose x range reached past
+// 65,536 others lost its pairs there (measured 2026-12-02). A round stays far below that; a
+// longer scan continues in the next round.
+const SWEEP_STEP: u32 = 16384u;
 
 // BodyBox, BoxParams and SortStage come from the prelude (frcd-gpu).
-// params.n: body count, output capacity, padded count (power of two, >= BLOCK), unused.
+// params.n: body count, output capacity, padded count (power of two, >= BLOCK), sweep round.
 
 @group(0) @binding(0) var<storage, read> boxes: array<BodyBox>;
 @group(0) @binding(1) var<storage, read_write> out_pairs: array<vec2<u32>>;
-@group(0) @binding(2) var<storage, read_write> count: atomic<u32>;
+// [0]: pairs found (past the output's capacity only counted); [1]: nonzero when a scan of
+// this round was cut off by its window (another round is needed).
+@group(0) @binding(2) var<storage, read_write> count: array<atomic<u32>, 2>;
 @group(0) @binding(3) var<uniform> params: BoxParams;
 @group(0) @binding(4) var<storage, read_write> keys: array<vec2<u32>>;
 @group(0) @binding(5) var<storage, read_write> sorted: array<BodyBox>;
@@ -143,26 +154,42 @@ fn sweep(@builtin(global_invocation_id) gid: vec3<u32>) {
     if p >= n {
         return;
     }
+    // This round's window of candidates (n < 2^31 and rounds <= n / SWEEP_STEP + 1: no wrap).
+    let start = p + 1u + params.n.w * SWEEP_STEP;
+    if start >= n {
+        return;
+    }
+    let end = min(n, start + SWEEP_STEP);
     let a = sorted[p];
     let ia = keys[p].y;
     let reach = a.hi_up.x;
-    for (var q = p + 1u; q < n; q++) {
-        let b = sorted[q];
-        if b.lo_dn.x > reach {
+    var q = start;
+    loop {
+        if q >= end {
             break;
         }
-        if !meet(a.lo_dn.xyz, a.hi_up.xyz, b.lo_dn.xyz, b.hi_up.xyz) {
-            continue;
+        let b = sorted[q];
+        if b.lo_dn.x > reach {
+            return;
         }
-        let sure = meet(a.lo_up.xyz, a.hi_dn.xyz, b.lo_up.xyz, b.hi_dn.xyz);
-        let ib = keys[q].y;
-        let slot = atomicAdd(&count, 1u);
-        if slot < params.n.y {
-            var tag = max(ia, ib);
-            if !sure {
-                tag = tag | UNCERTAIN_FLAG;
+        if meet(a.lo_dn.xyz, a.hi_up.xyz, b.lo_dn.xyz, b.hi_up.xyz) {
+            let sure = meet(a.lo_up.xyz, a.hi_dn.xyz, b.lo_up.xyz, b.hi_dn.xyz);
+            let ib = keys[q].y;
+            let slot = atomicAdd(&count[0], 1u);
+            if slot < params.n.y {
+                var tag = max(ia, ib);
+                if !sure {
+                    tag = tag | UNCERTAIN_FLAG;
+                }
+                out_pairs[slot] = vec2<u32>(min(ia, ib), tag);
             }
-            out_pairs[slot] = vec2<u32>(min(ia, ib), tag);
         }
+        continuing {
+            q = q + 1u;
+        }
+    }
+    // Cut off by the window with candidates left: the next round goes on from `end`.
+    if end < n {
+        atomicMax(&count[1], 1u);
     }
 }

@@ -102,9 +102,10 @@ impl SweepBuffers {
             B::UNIFORM | B::COPY_DST,
         );
         let params = buf("frcd-gpgpu sweep params", 16, B::UNIFORM | B::COPY_DST);
+        // The pair count and the "another round" flag (sweep.wgsl).
         let count = buf(
             "frcd-gpgpu sweep pair count",
-            4,
+            8,
             B::STORAGE | B::COPY_SRC | B::COPY_DST,
         );
         let (out, staging) = output_buffers(ctx, output_cap);
@@ -261,7 +262,10 @@ impl GpuContext {
     /// ([`Aabb::intersects`], the CPU broad phase's set), sorted, `i < j`.
     ///
     /// One submission and one readback; an output overflow grows `scratch` to the count the
-    /// GPU found and re-runs only the sweep pass (one more of each). Boxes with NaN are an
+    /// GPU found and re-runs only the sweep pass (one more of each). A box scans at most
+    /// 16,384 candidates per submission (a software driver such as llvmpipe silently ends a
+    /// shader's loops after 65,535 iterations): a scene where one box's range on the sweep axis
+    /// holds more takes one more submission and readback per 16,384. Boxes with NaN are an
     /// error; empty boxes overlap nothing.
     ///
     /// ```no_run
@@ -299,6 +303,10 @@ impl GpuContext {
         let axis = sweep_axis(boxes);
         let words: Vec<BodyBox> = boxes.iter().map(|b| permuted(body_box(b), axis)).collect();
         let mut sorted = false;
+        // Sweep round (sweep.wgsl: a box's scan covers SWEEP_STEP candidates a round) and
+        // output overflows so far.
+        let mut round = 0u32;
+        let mut overflows = 0;
         loop {
             let bufs = scratch.ensure_sweep(self, n as u32)?;
             let padded = bufs.body_cap;
@@ -312,7 +320,7 @@ impl GpuContext {
                 &bufs.params,
                 0,
                 bytemuck::bytes_of(&BoxParams {
-                    n: [n as u32, bufs.output_cap, padded, 0],
+                    n: [n as u32, bufs.output_cap, padded, round],
                 }),
             );
             if !sorted {
@@ -326,7 +334,12 @@ impl GpuContext {
                 }
                 self.queue.write_buffer(&bufs.stages, 0, &table);
             }
-            enc.clear_buffer(&bufs.count, 0, None);
+            if round == 0 {
+                enc.clear_buffer(&bufs.count, 0, None);
+            } else {
+                // Later rounds append to the pairs found so far; only the flag restarts.
+                enc.clear_buffer(&bufs.count, 4, Some(4));
+            }
             {
                 let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("frcd-gpgpu sweep"),
@@ -350,21 +363,30 @@ impl GpuContext {
                 run(Pass::Sweep, 0, body_groups);
             }
             let out_bytes = bufs.output_cap as u64 * 8;
-            enc.copy_buffer_to_buffer(&bufs.count, 0, &bufs.staging, 0, 4);
+            enc.copy_buffer_to_buffer(&bufs.count, 0, &bufs.staging, 0, 8);
             enc.copy_buffer_to_buffer(&bufs.out, 0, &bufs.staging, 8, out_bytes);
             let index = self.submit(enc.finish());
             answer.submissions += 1;
             let bytes = self.read_back(&bufs.staging, 8 + out_bytes, index)?;
             answer.readbacks += 1;
             let entries: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
-            let count = entries[0];
+            let (count, more) = (entries[0], entries[1] != 0);
             if count > bufs.output_cap {
-                if answer.submissions > MAX_RERUNS {
+                overflows += 1;
+                if overflows > MAX_RERUNS {
                     return Err(GpuError::Internal("box sweep keeps overflowing".into()));
                 }
                 // The body buffers (sorted keys and boxes) are kept: only the sweep re-runs,
-                // into an output buffer grown to the count the GPU found.
+                // from its first round, into an output buffer grown to the count the GPU found.
                 scratch.output_cap = count.max(bufs.output_cap.saturating_mul(2));
+                sorted = true;
+                round = 0;
+                continue;
+            }
+            if more {
+                // A box reaches past this round's window (SWEEP_STEP candidates): the next
+                // round scans on from there, adding to the pairs found.
+                round += 1;
                 sorted = true;
                 continue;
             }

@@ -256,3 +256,36 @@ fn the_broad_phase_equals_the_f64_answer_on_both_sides_of_its_threshold() {
         assert_eq!(got.pairs, sweep.pairs, "{n} bodies: against the sweep");
     }
 }
+
+/// One box whose range on the sweep axis holds more than 65,536 others: llvmpipe ends a
+/// shader's loops after 65,535 iterations in all, and a scan that long lost the box's one pair
+/// there (2026-12-02). The scan now runs in rounds of a bounded window: the pair is found, in
+/// more than one submission, and a scene one box short of a second round takes one.
+#[test]
+fn a_box_reaching_past_65536_others_keeps_its_pairs() {
+    let Some(ctx) = ctx() else { return };
+    for n in [16_385usize, 70_000] {
+        // Box 0 spans every other box's x range; the others are apart on x and y, except the
+        // last, which meets box 0 (its scan's last candidate).
+        let mut boxes = vec![Aabb::new(DVec3::ZERO, DVec3::new(1e6, 1.0, 1.0))];
+        for k in 1..n {
+            let x = k as f64 * 2.0;
+            let y = if k == n - 1 { 0.5 } else { 10.0 };
+            boxes.push(Aabb::new(
+                DVec3::new(x, y, 0.0),
+                DVec3::new(x + 0.5, y + 0.5, 0.5),
+            ));
+        }
+        let got = ctx
+            .overlapping_bodies(&boxes, &mut BoxScratch::default())
+            .unwrap();
+        assert_eq!(got.pairs, vec![(0, (n - 1) as u32)], "{n} boxes");
+        // Box 0 scans n - 1 candidates, 16,384 a round.
+        let rounds = (n - 1).div_ceil(16_384) as u32;
+        assert_eq!(
+            (got.submissions, got.readbacks),
+            (rounds, rounds),
+            "{n} boxes"
+        );
+    }
+}
