@@ -29,7 +29,7 @@ fn set_args(m: u32) {
 
 // The CPU wrote the batch's root pairs (k, ONE_NODE | 0, ONE_NODE | 0) into frontier 0 (at most
 // its capacity), and (1, 1, 1) into the indirect arguments of levels 1 and 2 (`traverse` raises
-// them). A level runs four invocations per entry (`traverse`).
+// them). A level runs one invocation per entry (`traverse`).
 @compute @workgroup_size(1)
 fn init() {
     let n = params.caps.w;
@@ -42,7 +42,7 @@ fn init() {
     atomicStore(&state.needed, n);
     state.levels = 0u;
     state.pairs_tested = 0u;
-    set_args(4u * m);
+    set_args(m);
 }
 
 // After the last level: one invocation per listed triangle pair (at most the list's capacity;

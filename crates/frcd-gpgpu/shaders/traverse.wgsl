@@ -1,12 +1,12 @@
 // frcd-gpgpu: one level of the breadth-first traversal of the pair trees of a whole batch of
 // body pairs (one frame: every candidate pair in one dispatch chain).
 //
-// Each invocation takes one node pair (one of the up to four child pairs a frontier entry names)
-// and runs the separating-axis test in f32 with a computed error bound, so rounding can only keep
-// a pair, never drop one. Overlapping pairs with an internal node append one entry naming their
-// children to the next frontier (atomic compaction); overlapping leaf pairs append every
-// triangle pair of the two leaves to
-// the triangle list. After the last level, `triangles` runs the triangle test (Guigue-Devillers
+// Each invocation takes one frontier entry, a pair of overlapping nodes, and runs the
+// separating-axis test in f32 with a computed error bound on each of its (up to four) child
+// pairs, so rounding can only keep a pair, never drop one. Overlapping child pairs with an
+// internal node append one entry each, naming their children, to the next frontier (atomic
+// compaction, one atomic per invocation); overlapping leaf pairs append every triangle pair of
+// the two leaves to the triangle list. After the last level, `triangles` runs the triangle test (Guigue-Devillers
 // orientation form) once per listed pair, one pair per invocation (the tests of a leaf pair no
 // longer run as a loop in the few lanes that reached a leaf: a SIMD driver such as llvmpipe
 // then kept the other lanes of the vector idle), and appends the touching pairs to the output,
@@ -71,7 +71,7 @@ override EXACT_PATH: bool = true;
 // `traverse`: this level's frontier (binding 0), the next level's (binding 1), both entries
 // (pair, children of A, children of B, unused): each names a pair of overlapping internal
 // nodes by their first children (`link`), or a node itself with ONE_NODE set (a leaf, or a
-// root); the level runs four invocations per entry, one per child pair. Then the triangle
+// root); the level runs one invocation per entry, which tests its child pairs. Then the triangle
 // list it appends to (binding 3),
 // entries (pair, triangle of A, triangle of B, unused), triangles in leaf order relative to each
 // mesh's first triangle.
@@ -223,23 +223,49 @@ fn maxabs(v: vec3<f32>) -> f32 {
 //   + (20U + 4 eps) (sum h_A + sum h_B) + 128 TAU (1 + sum h + |tt|_1) (flush-to-zero: each of
 // the ~20 operations behind an entry may lose TAU, later scaled by at most h, |tt| or 1), all
 // terms >= 0, times 1.01 for the ~15 roundings of err itself. The same err serves all 15 axes.
-fn obb_overlap(na: Node, nb: Node, eps_ab: f32) -> bool {
-    let b0 = rot(nb.a0);
-    let b1 = rot(nb.a1);
-    let b2 = rot(nb.a2);
-    let tt = rot(nb.c) + pose.t.xyz - na.c;
+// B's node as both of A's children see it: its axes and centre mapped into A's frame by the
+// pair's pose (rot(b) + t), and the error bound's |c_B|_1 + |t|_1. A frontier entry tests each
+// of B's (up to) two children against each of A's, so this is done once per B child, not once
+// per child pair; the operations and their order are those of the test itself.
+struct MappedB {
+    b0: vec3<f32>,
+    b1: vec3<f32>,
+    b2: vec3<f32>,
+    // rot(c_B) + t
+    c: vec3<f32>,
+    h: vec3<f32>,
+    // l1(c_B) + l1(t)
+    lc: f32,
+}
+
+fn map_b(nb: Node) -> MappedB {
+    var m: MappedB;
+    m.b0 = rot(nb.a0);
+    m.b1 = rot(nb.a1);
+    m.b2 = rot(nb.a2);
+    m.c = rot(nb.c) + pose.t.xyz;
+    m.h = nb.h;
+    m.lc = l1(nb.c) + l1(pose.t.xyz);
+    return m;
+}
+
+fn obb_overlap(na: Node, mb: MappedB, eps_ab: f32) -> bool {
+    let b0 = mb.b0;
+    let b1 = mb.b1;
+    let b2 = mb.b2;
+    let tt = mb.c - na.c;
     // Rows: A's axes; columns: B's axes.
     let c0 = vec3<f32>(dot(na.a0, b0), dot(na.a0, b1), dot(na.a0, b2));
     let c1 = vec3<f32>(dot(na.a1, b0), dot(na.a1, b1), dot(na.a1, b2));
     let c2 = vec3<f32>(dot(na.a2, b0), dot(na.a2, b1), dot(na.a2, b2));
     let t = vec3<f32>(dot(na.a0, tt), dot(na.a1, tt), dot(na.a2, tt));
     let ha = na.h;
-    let hb = nb.h;
+    let hb = mb.h;
     let sha = ha.x + ha.y + ha.z;
     let shb = hb.x + hb.y + hb.z;
     let ltt = l1(tt);
     let eps = eps_ab + U;
-    let err = (20.0 * U * (l1(nb.c) + l1(pose.t.xyz)) + (48.0 * U + 5.0 * eps) * ltt
+    let err = (20.0 * U * mb.lc + (48.0 * U + 5.0 * eps) * ltt
         + (20.0 * U + 4.0 * eps) * (sha + shb)
         + 128.0 * TAU * (1.0 + sha + shb + ltt)) * 1.01;
     let a0 = abs(c0);
@@ -576,26 +602,32 @@ fn tri_pair(pi: u32, a0: vec4<f32>, a1: vec4<f32>, a2: vec4<f32>,
     return select(r, TRI_UNCERTAIN, !rotated && w.w == 0.0);
 }
 
-// Appends every triangle pair of two overlapping leaves to the triangle list (past its capacity
-// nothing is written; the CPU sees `state.tris` above it and re-runs with a larger list).
-fn leaf_pair(p: u32, na: Node, nb: Node) {
-    let k = na.count * nb.count;
+// Reserves `k` entries of the triangle list (one atomic for all the leaf pairs of an entry) and
+// returns the first. The counter stops near 2^31 (beyond every capacity: the CPU re-runs or
+// refuses): every reservation that takes it past 2^31 brings it back there, and one level
+// reserves less than 2^31 in all (checked on the CPU), so it never wraps.
+fn reserve_tris(k: u32) -> u32 {
     let base = atomicAdd(&state.tris, k);
-    // The counter stops near 2^31 (beyond every capacity: the CPU re-runs or refuses): every
-    // append that takes it past 2^31 brings it back there, and one level appends less than 2^31
-    // in all (checked on the CPU), so it never wraps.
     if base + k > 0x80000000u {
         atomicMin(&state.tris, 0x80000000u);
     }
-    if base + k <= params.caps2.x {
-        var w = base;
-        for (var i = 0u; i < na.count; i++) {
-            for (var j = 0u; j < nb.count; j++) {
+    return base;
+}
+
+// Writes every triangle pair of two overlapping leaves to the triangle list from entry `w` on
+// (past its capacity nothing is written; the CPU sees `state.tris` above it and re-runs with a
+// larger list); returns the entry after them.
+fn write_leaf_pair(p: u32, na: Node, nb: Node, w0: u32) -> u32 {
+    var w = w0;
+    for (var i = 0u; i < na.count; i++) {
+        for (var j = 0u; j < nb.count; j++) {
+            if w < params.caps2.x {
                 tri_list[w] = vec4<u32>(p, na.first + i, nb.first + j, 0u);
-                w++;
             }
+            w++;
         }
     }
+    return w;
 }
 
 // The x extent of the grid `control.wgsl`'s `set_args` made for `m` invocations (the same
@@ -607,20 +639,19 @@ fn grid_x(m: u32) -> u32 {
 }
 
 // The next level's indirect arguments, raised to cover entries [base, base + k) of its
-// frontier (at most the capacity), four invocations each: ceil(4 m / WG) workgroups as
+// frontier (at most the capacity), one invocation each: ceil(m / WG) workgroups as
 // `control.wgsl`'s `set_args` lays them out, x = min(groups, caps.z) and y = ceil(groups /
 // caps.z), both non-decreasing in m, so the largest raise is the arguments of the final size.
-// Only the append that opens a new workgroup raises them (one append in WG / 4), so the
-// atomics stay few. An append past the capacity also records the size asked for (`needed`).
+// Only the append that opens a new workgroup raises them, so the atomics stay few. An append
+// past the capacity also records the size asked for (`needed`).
 fn append_args(base: u32, k: u32) {
     let cap = params.caps.x;
     let end = base + k;
     if end > cap {
         atomicMax(&state.needed, end);
     }
-    // Four invocations per entry (16 entries per workgroup).
-    let before = (min(base, cap) * 4u + WG - 1u) / WG;
-    let groups = (min(end, cap) * 4u + WG - 1u) / WG;
+    let before = (min(base, cap) + WG - 1u) / WG;
+    let groups = (min(end, cap) + WG - 1u) / WG;
     if groups > before {
         atomicMax(&args_next[0], min(groups, params.caps.z));
         atomicMax(&args_next[1], (groups + params.caps.z - 1u) / params.caps.z);
@@ -681,49 +712,87 @@ fn traverse(@builtin(workgroup_id) wid: vec3<u32>,
         args_after[2] = 1u;
         if cur > 0u {
             state.levels += 1u;
-            // Entries; the CPU counts four slots per entry (those of a single node's missing
-            // children return untested).
+            // Entries; the CPU counts four child pairs per entry (a single node's missing
+            // children included).
             state.pairs_tested += cur;
         }
     }
-    // One invocation per child pair of an entry: child j & 1 of A's, j >> 1 of B's.
-    let slots = 4u * cur;
-    let idx = (wid.y * grid_x(slots) + wid.x) * WG + lid;
-    if idx >= slots {
+    // One invocation per entry: its (up to) four child pairs, child x of A's with child y of
+    // B's. One invocation rather than four: the pose and the entry are read once, and each of
+    // B's children is mapped into A's frame once for both of A's (on a SIMD software driver
+    // such as llvmpipe the texel fetches were about 45 % of this pass, 2026-12-02).
+    let idx = (wid.y * grid_x(cur) + wid.x) * WG + lid;
+    if idx >= cur {
         return;
     }
-    let entry = frontier_in[idx >> 2u];
-    let j = idx & 3u;
+    let entry = frontier_in[idx];
     let one_a = (entry.y & ONE_NODE) != 0u;
     let one_b = (entry.z & ONE_NODE) != 0u;
-    if (one_a && (j & 1u) != 0u) || (one_b && j >= 2u) {
-        return;
-    }
-    // Node indices in the frontier are relative to each mesh's first node.
-    let ia = (entry.y & ~ONE_NODE) + (j & 1u);
-    let ib = (entry.z & ~ONE_NODE) + (j >> 1u);
+    // Node indices in the frontier are relative to each mesh's first node; a single node has no
+    // second child: its second "child" is itself again, and its pairs are not tested.
+    let ia = entry.y & ~ONE_NODE;
+    let ib = entry.z & ~ONE_NODE;
     // Only the f32 pose, the bases and the axes' bound (the exact path's words are the
     // triangle pass's).
     load_pose(entry.x);
     load_pose_eps(entry.x);
-    let na = load_node(pose.base.x + ia);
-    let nb = load_node(pose.base.z + ib);
-    if !obb_overlap(na, nb, pose_eps) {
+    let a0 = load_node(pose.base.x + ia);
+    let a1 = load_node(pose.base.x + ia + select(1u, 0u, one_a));
+    let nb0 = load_node(pose.base.z + ib);
+    let nb1 = load_node(pose.base.z + ib + select(1u, 0u, one_b));
+    let b0 = map_b(nb0);
+    let b1 = map_b(nb1);
+    let o00 = obb_overlap(a0, b0, pose_eps);
+    let o10 = !one_a && obb_overlap(a1, b0, pose_eps);
+    let o01 = !one_b && obb_overlap(a0, b1, pose_eps);
+    let o11 = !one_a && !one_b && obb_overlap(a1, b1, pose_eps);
+    // Overlapping pairs of two leaves list their triangle pairs; the others (at least one
+    // internal node) become one entry of the next frontier, which descends both trees at once
+    // where both are internal (a leaf stays as it is): the pair tree's depth is then the
+    // deeper of the two trees, which bounds the number of levels recorded on the CPU.
+    let l00 = o00 && a0.leaf && nb0.leaf;
+    let l10 = o10 && a1.leaf && nb0.leaf;
+    let l01 = o01 && a0.leaf && nb1.leaf;
+    let l11 = o11 && a1.leaf && nb1.leaf;
+    let d00 = o00 && !l00;
+    let d10 = o10 && !l10;
+    let d01 = o01 && !l01;
+    let d11 = o11 && !l11;
+    let k = select(0u, a0.count * nb0.count, l00) + select(0u, a1.count * nb0.count, l10)
+        + select(0u, a0.count * nb1.count, l01) + select(0u, a1.count * nb1.count, l11);
+    if k > 0u {
+        var w = reserve_tris(k);
+        if l00 { w = write_leaf_pair(entry.x, a0, nb0, w); }
+        if l10 { w = write_leaf_pair(entry.x, a1, nb0, w); }
+        if l01 { w = write_leaf_pair(entry.x, a0, nb1, w); }
+        if l11 { w = write_leaf_pair(entry.x, a1, nb1, w); }
+    }
+    let n = select(0u, 1u, d00) + select(0u, 1u, d10) + select(0u, 1u, d01) + select(0u, 1u, d11);
+    if n == 0u {
         return;
     }
-    if na.leaf && nb.leaf {
-        leaf_pair(entry.x, na, nb);
-        return;
-    }
-    // Descend both trees at once where both are internal (a leaf stays as it is): the pair
-    // tree's depth is then the deeper of the two trees, which bounds the number of levels
-    // recorded on the CPU. One entry names all (up to four) child pairs.
-    let ea = select(na.first_child, ia | ONE_NODE, na.leaf);
-    let eb = select(nb.first_child, ib | ONE_NODE, nb.leaf);
-    let base = atomicAdd(&state.counts[level.slots.y], 1u);
-    append_args(base, 1u);
+    // A child's entry names its children by the first one, or a leaf itself.
+    let ea0 = select(a0.first_child, ia | ONE_NODE, a0.leaf);
+    let ea1 = select(a1.first_child, (ia + 1u) | ONE_NODE, a1.leaf);
+    let eb0 = select(nb0.first_child, ib | ONE_NODE, nb0.leaf);
+    let eb1 = select(nb1.first_child, (ib + 1u) | ONE_NODE, nb1.leaf);
+    var w = atomicAdd(&state.counts[level.slots.y], n);
+    append_args(w, n);
     // Past capacity nothing is written; the CPU sees `needed` above the capacity and re-runs.
-    if base < params.caps.x {
-        frontier_out[base] = vec4<u32>(entry.x, ea, eb, 0u);
+    let cap = params.caps.x;
+    if d00 {
+        if w < cap { frontier_out[w] = vec4<u32>(entry.x, ea0, eb0, 0u); }
+        w++;
+    }
+    if d10 {
+        if w < cap { frontier_out[w] = vec4<u32>(entry.x, ea1, eb0, 0u); }
+        w++;
+    }
+    if d01 {
+        if w < cap { frontier_out[w] = vec4<u32>(entry.x, ea0, eb1, 0u); }
+        w++;
+    }
+    if d11 {
+        if w < cap { frontier_out[w] = vec4<u32>(entry.x, ea1, eb1, 0u); }
     }
 }

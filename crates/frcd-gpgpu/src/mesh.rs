@@ -352,10 +352,13 @@ impl GpuMesh {
     }
 }
 
-/// Most triangles one leaf of an uploaded tree may hold: a leaf pair lists every triangle pair
-/// of its two leaves (up to 65,536) in one append, and the counters must not wrap (see
-/// `query`). Trees for the GPU have small leaves (the hybrid checker's: 4 triangles).
-pub const MAX_LEAF_TRIANGLES: u32 = 256;
+/// Most triangles one leaf of an uploaded tree may hold (trees for the GPU have small leaves:
+/// the builder's default is 2, the hybrid checker's 4). A traversal invocation lists every
+/// triangle pair of up to four overlapping leaf pairs in loops, and a software driver such as
+/// llvmpipe silently ends a shader's loops once they have run 65,535 iterations in all (Mesa's
+/// `LP_MAX_TGSI_LOOP_ITERATIONS`): four leaf pairs of 64 take at most 4 × (64 + 64²) = 16,640.
+/// Leaves of 160 lost pairs there (measured 2026-12-02, when the limit was 256).
+pub const MAX_LEAF_TRIANGLES: u32 = 64;
 
 impl GpuContext {
     /// Uploads a tree (nodes and triangles, local frame, f32 rounded outward) once into the

@@ -58,7 +58,7 @@ pub struct GpuCollision {
     pub exact_offsets: bool,
     /// Node pairs the GPU's traversal took up, for the whole batch: four per frontier entry,
     /// the child pairs of a pair of overlapping nodes (a leaf has no second child: those
-    /// slots return without a separating-axis test, and are counted).
+    /// pairs are not tested, and are counted).
     pub node_pairs_tested: u64,
     /// Traversal levels that had work, for the whole batch.
     pub levels: u32,
@@ -263,8 +263,8 @@ impl QueryScratch {
         // argument within the device's limits (the context skips wgpu's validation of them);
         // `run` refuses a batch that needs more.
         let most = dispatchable(ctx);
-        // A level runs four invocations per frontier entry.
-        self.frontier_cap = self.frontier_cap.min(most / 4);
+        // A level runs one invocation per frontier entry.
+        self.frontier_cap = self.frontier_cap.min(most);
         self.tri_cap = self.tri_cap.min(most);
         let fsize = self.frontier_cap as u64 * ENTRY_BYTES;
         let osize = self.output_cap as u64 * ENTRY_BYTES;
@@ -403,6 +403,14 @@ impl QueryScratch {
         });
         Ok(())
     }
+}
+
+/// The frontier capacity a level runs with: the scratch's, held below 2^31 / (4 ×
+/// `leaf_pairs`) so that one level's triangle pairs (up to four leaf pairs per entry, each of up
+/// to `leaf_pairs` triangle pairs) stay below 2^31 and the list's counter never wraps.
+fn level_cap(frontier_cap: u32, leaf_pairs: u64) -> u32 {
+    let wrap = ((1u64 << 31) - 1) / (4 * leaf_pairs.max(1));
+    (frontier_cap as u64).min(wrap) as u32
 }
 
 /// Entries one x × y dispatch of 64-invocation workgroups covers on `ctx`'s device (at most
@@ -950,24 +958,18 @@ impl GpuContext {
         let n = p.frames.len() as u32;
         scratch.ensure(self, n)?;
         let bufs = scratch.bufs.as_ref().expect("ensured");
-        // One level lists at most frontier × leaf pair triangle pairs; every append that
-        // takes the triangle counter past 2^31 brings it back there (`leaf_pair`), so below
-        // 2^31 per level it never wraps (a wrapped counter would look like a short list:
-        // pairs lost).
-        let per_level = bufs.frontier_cap as u64 * p.leaf_pairs;
-        if per_level >= 1 << 31 {
-            return Err(GpuError::CapacityExceeded {
-                what: "triangle pairs one level may list (frontier capacity × leaf sizes)",
-                needed: per_level,
-                limit: (1 << 31) - 1,
-            });
-        }
+        // One level lists at most its entries × 4 child pairs × the largest leaf pair's
+        // triangle pairs; every reservation that takes the triangle counter past 2^31 brings it
+        // back there (`reserve_tris`), so below 2^31 per level it never wraps (a wrapped
+        // counter would look like a short list: pairs lost). The level's capacity is held
+        // below that (`level_cap`); a batch that needs more is refused after its run.
+        let level_cap = level_cap(bufs.frontier_cap, p.leaf_pairs);
         let max_groups = self.limits.max_compute_workgroups_per_dimension;
         self.queue.write_buffer(
             &bufs.params,
             0,
             bytemuck::bytes_of(&Params {
-                caps: [bufs.frontier_cap, bufs.output_cap, max_groups, n],
+                caps: [level_cap, bufs.output_cap, max_groups, n],
                 caps2: [bufs.tri_cap, 0, 0, 0],
             }),
         );
@@ -1103,9 +1105,14 @@ impl GpuContext {
             let most = dispatchable(self);
             for (what, count, limit) in [
                 (
-                    "node pairs one level lists (workgroups per dimension squared × 16)",
+                    "node pairs one level lists (workgroups per dimension squared × 64)",
                     needed,
-                    most / 4,
+                    most,
+                ),
+                (
+                    "node pairs one level lists (2^31 triangle pairs / (4 × the largest leaf pair's))",
+                    needed,
+                    level_cap(u32::MAX, p.leaf_pairs),
                 ),
                 (
                     "triangle pairs one batch lists (workgroups per dimension squared × 64)",
