@@ -1201,6 +1201,19 @@ impl GpuContext {
 mod tests {
     use super::*;
 
+    /// A level's capacity keeps its worst case (every entry with four leaf pairs of the
+    /// largest size) below 2^31 triangle pairs, and is the largest that does; below that bound
+    /// the scratch's capacity is kept.
+    #[test]
+    fn level_capacity_keeps_the_triangle_counter_below_2_pow_31() {
+        for lp in [1u64, 4, 16, 4096, 64 * 64] {
+            let cap = level_cap(u32::MAX, lp) as u64;
+            assert!(4 * cap * lp < 1 << 31, "leaf pair {lp}");
+            assert!(4 * (cap + 1) * lp >= 1 << 31, "leaf pair {lp}");
+            assert_eq!(level_cap(1000, lp), 1000);
+        }
+    }
+
     /// Two meshes of two triangles each: A's triangle 0 and B's triangle 1 cross, every other
     /// pair is far apart (B's poses are the identity, so the frame is too).
     fn two_by_two() -> Prepared {
