@@ -97,6 +97,15 @@ pub struct Opts {
     /// empty: skipped.
     #[arg(long = "checker-parts", value_name = "N,..", value_delimiter = ',')]
     pub checker: Vec<usize>,
+    /// Checker section: also time GPGPU `check` with GPU trees of these leaf sizes
+    /// (`frcd_hybrid::Options::gpu_build`), alternated run by run with the default's in one
+    /// process (answers checked equal to the CPU backend's); empty: skipped.
+    #[arg(
+        long = "checker-gpu-leaves",
+        value_name = "N,..",
+        value_delimiter = ','
+    )]
+    pub checker_gpu_leaves: Vec<u32>,
     /// Time every GPU pass of the batches with GPU timestamps (where the adapter has
     /// timestamps inside passes) for the breakdown table; the host's split (waiting for the
     /// GPU, the CPU's re-decision) is always written.
@@ -684,6 +693,9 @@ pub fn run(mut o: Opts) -> Result<()> {
     let mut checker_rows: Vec<CheckerRow> = Vec::new();
     for &n in &o.checker {
         checker_rows.push(checker_row(n, o.runs, warm)?);
+        if !o.checker_gpu_leaves.is_empty() {
+            checker_leaf_sizes(n, o.runs, &o.checker_gpu_leaves)?;
+        }
     }
 
     let mut box_rows = Vec::new();
@@ -1106,19 +1118,9 @@ struct CheckerRow {
 /// `runs` sequences, for the CPU backend, GPGPU `check` and GPGPU `check_pipelined`; answers
 /// checked equal frame by frame.
 fn checker_row(n: usize, runs: usize, warm: Duration) -> Result<CheckerRow> {
-    use frcd_hybrid::{Backend, BodySpec, Checker, FrameState, GpuPolicy, Options, Pipeline};
-    let meshes: Vec<std::sync::Arc<frcd_geom::TriMesh>> = (0..n.min(4))
-        .map(|i| std::sync::Arc::new(frame_part(i)))
-        .collect();
-    let bodies: Vec<BodySpec> = (0..n)
-        .map(|i| BodySpec {
-            name: format!("part{i}"),
-            mesh: meshes[i % 4].clone(),
-            is_static: false,
-        })
-        .collect();
+    use frcd_hybrid::{Backend, Checker, FrameState, GpuPolicy, Options, Pipeline};
+    let (bodies, frames) = checker_scene(n);
     let triangles: usize = bodies.iter().map(|b| b.mesh.triangle_count()).sum();
-    let frames: Vec<Vec<Pose>> = (0..8).map(|f| frame_poses(n, f)).collect();
     let gpu = Options {
         backend: Backend::Gpgpu,
         gpu: GpuPolicy::Require,
@@ -1223,6 +1225,97 @@ fn checker_row(n: usize, runs: usize, warm: Duration) -> Result<CheckerRow> {
         plain,
         piped,
     })
+}
+
+/// Frames of the checker section, `n` parts: the bodies and the 8 frames' poses.
+fn checker_scene(n: usize) -> (Vec<frcd_hybrid::BodySpec>, Vec<Vec<Pose>>) {
+    let meshes: Vec<std::sync::Arc<frcd_geom::TriMesh>> = (0..n.min(4))
+        .map(|i| std::sync::Arc::new(frame_part(i)))
+        .collect();
+    let bodies = (0..n)
+        .map(|i| frcd_hybrid::BodySpec {
+            name: format!("part{i}"),
+            mesh: meshes[i % 4].clone(),
+            is_static: false,
+        })
+        .collect();
+    (bodies, (0..8).map(|f| frame_poses(n, f)).collect())
+}
+
+/// GPGPU `check` per frame of the checker section with GPU trees of each of `leaves` against
+/// the default trees, in one process: every run times one 8-frame sequence of each variant in
+/// turn (so host noise falls on all alike); prints each variant's median and the median of
+/// its per-run ratios to the default.
+fn checker_leaf_sizes(n: usize, runs: usize, leaves: &[u32]) -> Result<()> {
+    use frcd_hybrid::{Backend, Checker, FrameState, GpuPolicy, Options};
+    let (bodies, frames) = checker_scene(n);
+    let gpu = Options {
+        backend: Backend::Gpgpu,
+        gpu: GpuPolicy::Require,
+        ..Options::default()
+    };
+    let cpu = Options {
+        backend: Backend::Cpu,
+        gpu: GpuPolicy::Off,
+        ..Options::default()
+    };
+    let reference = Checker::new(bodies.clone(), &[], cpu)?;
+    let mut variants = vec![(
+        "default".to_string(),
+        Checker::new(bodies.clone(), &[], gpu.clone())?,
+    )];
+    for &l in leaves {
+        let o = Options {
+            gpu_build: Some(frcd_obb::BuildOptions {
+                max_leaf_triangles: l,
+                ..gpu.build
+            }),
+            ..gpu.clone()
+        };
+        variants.push((
+            format!("GPU leaves of {l}"),
+            Checker::new(bodies.clone(), &[], o)?,
+        ));
+    }
+    let key = |r: &frcd_hybrid::FrameResult| -> Vec<ContactKey> {
+        r.contacts
+            .iter()
+            .map(|c| (c.a, c.b, c.pairs.clone()))
+            .collect()
+    };
+    let mut states: Vec<FrameState> = variants.iter().map(|_| FrameState::default()).collect();
+    let mut cpu_state = FrameState::default();
+    for poses in &frames {
+        let want = key(&reference.check(poses, &mut cpu_state)?);
+        for ((name, c), st) in variants.iter().zip(&mut states) {
+            if key(&c.check(poses, st)?) != want {
+                bail!("checker, {n} parts: GPGPU check with {name} differs from the CPU backend");
+            }
+        }
+    }
+    let nf = frames.len() as f64;
+    let mut times: Vec<Vec<f64>> = vec![Vec::new(); variants.len()];
+    for _ in 0..runs {
+        for (k, ((_, c), st)) in variants.iter().zip(&mut states).enumerate() {
+            let t0 = Instant::now();
+            for poses in &frames {
+                std::hint::black_box(c.check(poses, st).expect("checked"));
+            }
+            times[k].push(t0.elapsed().as_secs_f64() * 1e3 / nf);
+        }
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    for (k, (name, _)) in variants.iter().enumerate() {
+        let ratio = median(times[k].iter().zip(&times[0]).map(|(a, b)| a / b).collect());
+        println!(
+            "checker, {n} parts, GPGPU check with {name}: {:.2} ms per frame (median of {runs}), {ratio:.3}x the default (median of per-run ratios)",
+            median(times[k].clone())
+        );
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -160,12 +160,24 @@ impl Checker {
 
     #[cfg(feature = "gpgpu")]
     fn make_gpgpu(&self) -> Result<Gpgpu, GpuFailure> {
+        use rayon::prelude::*;
         let ctx = frcd_gpgpu::GpuContext::headless()?;
-        let meshes = self
-            .trees
-            .iter()
-            .map(|t| ctx.upload(t))
-            .collect::<Result<Vec<_>, _>>()?;
+        let meshes = match self.options.gpu_build {
+            // Trees of their own for the GPU, dropped once packed (the upload keeps the mesh).
+            Some(gb) if gb != self.options.build => self
+                .meshes
+                .par_iter()
+                .map(|m| frcd_obb::ObbTree::build(m, &gb))
+                .collect::<Vec<_>>()
+                .iter()
+                .map(|t| ctx.upload(t))
+                .collect::<Result<Vec<_>, _>>()?,
+            _ => self
+                .trees
+                .iter()
+                .map(|t| ctx.upload(t))
+                .collect::<Result<Vec<_>, _>>()?,
+        };
         Ok(Gpgpu { ctx, meshes })
     }
 

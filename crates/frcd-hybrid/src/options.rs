@@ -91,6 +91,16 @@ pub struct Options {
     /// which measured 1.5-1.8x faster than 1 on the bogie demo, whose long thin tread
     /// triangles pass a few millimetres from the brake blocks).
     pub build: BuildOptions,
+    /// OBB trees the GPU pair traversal uploads (backend GPGPU, or the hybrid's GPU narrow
+    /// phase), built only when a GPU is used (`None`: the collision trees of
+    /// [`Options::build`]). Default: at most 2 triangles per leaf (frcd-obb's default, the
+    /// trees every frcd-gpgpu benchmark and real-GPU figure used): on the software driver
+    /// (lavapipe, 2 cores) the 64-part checker frame took 0.83-0.86 of its time with the
+    /// collision trees' leaves of 4 (`cargo xtask bench gpgpu --checker-gpu-leaves 2`, three
+    /// runs, 2026-12-02); a leaf pair of 4 lists up to 16 triangle pairs for the triangle pass.
+    /// The answers are the same either way: the GPU reports triangle pairs by the meshes' own
+    /// indices, and the CPU re-decides each exactly.
+    pub gpu_build: Option<BuildOptions>,
     /// OBB trees for the clearance distance searches, built only when a clearance threshold is
     /// set (`None`: the collision trees of [`Options::build`]). Default: at most 1 triangle per
     /// leaf: on the bogie demo the brake blocks' distance searches against the wheel treads
@@ -125,6 +135,7 @@ impl Default for Options {
                 max_leaf_triangles: 4,
                 ..BuildOptions::default()
             },
+            gpu_build: Some(BuildOptions::default()),
             clearance_build: Some(BuildOptions {
                 max_leaf_triangles: 1,
                 ..BuildOptions::default()

@@ -306,7 +306,7 @@ fn exact_gpgpu_and_gpu_heavy_hybrid_equal_oracle() {
         println!("SKIP exact_gpgpu: built without the 'gpgpu' feature");
         return;
     }
-    let (want, got, checker) = match run(&s, forced) {
+    let (want, got, checker) = match run(&s, forced.clone()) {
         Err(HybridError::Gpu {
             source: message, ..
         }) if !gpu_required() => {
@@ -316,6 +316,17 @@ fn exact_gpgpu_and_gpu_heavy_hybrid_equal_oracle() {
         other => other.expect("gpgpu backend"),
     };
     assert!(checker.has_gpgpu());
+    assert_eq!(want, got);
+    // The GPU's own trees (leaves of 2 by default) or the collision trees (leaves of 4): the
+    // same answers.
+    let (want, got, _) = run(
+        &s,
+        Options {
+            gpu_build: None,
+            ..forced
+        },
+    )
+    .expect("gpgpu backend on the collision trees");
     assert_eq!(want, got);
     // A cost model in which the GPU is free: hybrid puts broad and narrow phase on it.
     let cheap_gpu = CostModel {
