@@ -605,11 +605,23 @@ fn tri_pair(pi: u32, a0: vec4<f32>, a1: vec4<f32>, a2: vec4<f32>,
 // Reserves `k` entries of the triangle list (one atomic for all the leaf pairs of an entry) and
 // returns the first. The counter stops near 2^31 (beyond every capacity: the CPU re-runs or
 // refuses): every reservation that takes it past 2^31 brings it back there, and one level
-// reserves less than 2^31 in all (checked on the CPU), so it never wraps.
+// reserves less than 2^31 in all (checked on the CPU), so it never wraps. The reservation
+// that opens a new workgroup of the triangle pass raises that pass's indirect arguments, as
+// `append_args` does for the next level (both are non-decreasing in the list's size, so the
+// largest raise is the final size's; no control pass runs between the last level and the
+// triangle pass).
 fn reserve_tris(k: u32) -> u32 {
     let base = atomicAdd(&state.tris, k);
-    if base + k > 0x80000000u {
+    let end = base + k;
+    if end > 0x80000000u {
         atomicMin(&state.tris, 0x80000000u);
+    }
+    let cap = params.caps2.x;
+    let before = (min(base, cap) + WG - 1u) / WG;
+    let groups = (min(end, cap) + WG - 1u) / WG;
+    if groups > before {
+        atomicMax(&state.tri_args[0], min(groups, params.caps.z));
+        atomicMax(&state.tri_args[1], (groups + params.caps.z - 1u) / params.caps.z);
     }
     return base;
 }
@@ -630,8 +642,8 @@ fn write_leaf_pair(p: u32, na: Node, nb: Node, w0: u32) -> u32 {
     return w;
 }
 
-// The x extent of the grid `control.wgsl`'s `set_args` made for `m` invocations (the same
-// formula):
+// The x extent of the grid of `m` invocations (`query::grid_args`, and the raises of
+// `append_args` and `reserve_tris`, the same formula):
 // read from the counts rather than `@builtin(num_workgroups)`, which D3D12 reports as 0 when
 // wgpu's indirect-call validation is off (frcd-gpgpu's own instances turn it off).
 fn grid_x(m: u32) -> u32 {
@@ -640,7 +652,7 @@ fn grid_x(m: u32) -> u32 {
 
 // The next level's indirect arguments, raised to cover entries [base, base + k) of its
 // frontier (at most the capacity), one invocation each: ceil(m / WG) workgroups as
-// `control.wgsl`'s `set_args` lays them out, x = min(groups, caps.z) and y = ceil(groups /
+// `query::grid_args` lays them out, x = min(groups, caps.z) and y = ceil(groups /
 // caps.z), both non-decreasing in m, so the largest raise is the arguments of the final size.
 // Only the append that opens a new workgroup raises them, so the atomics stay few. An append
 // past the capacity also records the size asked for (`needed`).
@@ -702,7 +714,7 @@ fn traverse(@builtin(workgroup_id) wid: vec3<u32>,
     // discarded and the batch re-run with a larger frontier).
     let cur = min(atomicLoad(&state.counts[level.slots.x]), params.caps.x);
     // Every level after the first runs at least one workgroup (its arguments start at (1, 1, 1);
-    // an empty first level runs none, and its level after next starts from `init`'s values),
+    // an empty first level runs none, and its level after next starts from the CPU's values),
     // whose first invocation does the level's bookkeeping: the counter and the arguments of the
     // level after the next one, which nobody reads during this level, back to their start.
     if wid.x == 0u && wid.y == 0u && lid == 0u {

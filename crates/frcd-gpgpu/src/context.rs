@@ -108,7 +108,6 @@ fn exact_offsets_default(info: &wgpu::AdapterInfo) -> bool {
 pub(crate) struct Pipelines {
     pub arena_bgl: wgpu::BindGroupLayout,
     pub trav_bgl: wgpu::BindGroupLayout,
-    pub ctrl_bgl: wgpu::BindGroupLayout,
     pub boxes_bgl: wgpu::BindGroupLayout,
     pub traverse: wgpu::ComputePipeline,
     /// traverse.wgsl's triangle pass (one listed triangle pair per invocation), with the exact
@@ -116,9 +115,6 @@ pub(crate) struct Pipelines {
     pub triangles: wgpu::ComputePipeline,
     /// The triangle pass with the rotated path only (`EXACT_PATH = false`).
     pub triangles_rotated: wgpu::ComputePipeline,
-    pub init: wgpu::ComputePipeline,
-    /// control.wgsl's arguments of the triangle pass.
-    pub prepare_tris: wgpu::ComputePipeline,
     pub boxes: wgpu::ComputePipeline,
     pub sweep_bgl: wgpu::BindGroupLayout,
     /// sweep.wgsl's passes: keys, sort_local, sort_global, gather, sweep.
@@ -236,7 +232,7 @@ impl GpuContext {
 
     fn headless_locked(options: &HeadlessOptions) -> Result<Self, GpuError> {
         // Adapter and device through the shared setup of frcd-gpu.
-        // Every indirect dispatch here takes arguments `control.wgsl`'s `set_args` computed within
+        // Every indirect dispatch here takes arguments computed within
         // the device's limits (`QueryScratch::ensure` bounds the capacities, and a batch needing
         // more gets a typed `CapacityExceeded`), and the
         // shaders derive their grid from the counts, not `num_workgroups`: wgpu's validation of
@@ -600,10 +596,6 @@ impl Pipelines {
                 },
             ],
         );
-        let ctrl_bgl = bgl(
-            "frcd-gpgpu control",
-            &[storage(0, false), storage(1, false), uniform(2)],
-        );
         let boxes_bgl = bgl(
             "frcd-gpgpu boxes",
             &[
@@ -641,7 +633,6 @@ impl Pipelines {
             })
         };
         let traverse_mod = module("traverse.wgsl", shaders::TRAVERSE);
-        let control_mod = module("control.wgsl", shaders::CONTROL);
         let boxes_mod = module("boxes.wgsl", shaders::BOXES);
         let sweep_mod = module("sweep.wgsl", shaders::SWEEP);
         let layout = |label: &str, groups: &[&wgpu::BindGroupLayout]| {
@@ -654,7 +645,6 @@ impl Pipelines {
             })
         };
         let trav_layout = layout("frcd-gpgpu traverse", &[&arena_bgl, &trav_bgl]);
-        let ctrl_layout = layout("frcd-gpgpu control", &[&ctrl_bgl]);
         let boxes_layout = layout("frcd-gpgpu boxes", &[&boxes_bgl]);
         let sweep_layout = layout("frcd-gpgpu sweep", &[&sweep_bgl]);
         let specialized = |label: &str,
@@ -699,20 +689,12 @@ impl Pipelines {
                 "triangles",
                 &[("EXACT_PATH", 0.0)],
             ),
-            init: pipeline("frcd-gpgpu init", &ctrl_layout, &control_mod, "init"),
-            prepare_tris: pipeline(
-                "frcd-gpgpu prepare_tris",
-                &ctrl_layout,
-                &control_mod,
-                "prepare_tris",
-            ),
             boxes: pipeline("frcd-gpgpu boxes", &boxes_layout, &boxes_mod, "overlap"),
             sweep: ["make_keys", "sort_local", "sort_global", "gather", "sweep"]
                 .map(|entry| pipeline("frcd-gpgpu sweep", &sweep_layout, &sweep_mod, entry)),
             sweep_bgl,
             arena_bgl,
             trav_bgl,
-            ctrl_bgl,
             boxes_bgl,
         }
     }

@@ -12,6 +12,8 @@ const ONE_NODE: u32 = 0x8000_0000;
 const UNCERTAIN_FLAG: u32 = 0x8000_0000;
 /// Bytes of the `State` struct shared with the shaders (prelude).
 const STATE_BYTES: u64 = std::mem::size_of::<State>() as u64;
+/// Byte offset of `State::tri_args`, the triangle pass's indirect arguments.
+const TRI_ARGS_OFFSET: u64 = std::mem::offset_of!(State, tri_args) as u64;
 /// Bytes of the `Level` uniform (prelude).
 const LEVEL_BYTES: u64 = std::mem::size_of::<Level>() as u64;
 /// Bytes of one frontier or output entry (`vec4<u32>`).
@@ -29,8 +31,8 @@ const POSE_TEXELS: u32 = 5;
 const POSE_ROW_BYTES: usize = (POSE_PAIRS_PER_ROW * POSE_TEXELS * 16) as usize;
 /// Re-runs allowed after overflows before giving up (each at least doubles a buffer).
 const MAX_RERUNS: u32 = 32;
-/// Timestamps one batch may write with pass timers on: pass start, after `init`, after each
-/// level, after the triangle pass. A deeper batch (levels + 3 above this) is not timed.
+/// Timestamps one batch may write with pass timers on: pass start, after each level, after
+/// the triangle pass. A deeper batch (levels + 2 above this) is not timed.
 const MAX_TIMERS: u32 = 64;
 /// Bytes of the timestamps in the staging buffer (between the state and the output).
 const TIMER_BYTES: u64 = MAX_TIMERS as u64 * 8;
@@ -191,7 +193,6 @@ struct Buffers {
     trav_bg: [wgpu::BindGroup; 6],
     /// The triangle pass: triangle list in, output out.
     tri_bg: wgpu::BindGroup,
-    ctrl_bg: wgpu::BindGroup,
 }
 
 /// Caller-owned GPU buffers of pair queries (frontiers, output, pair table, staging), sized by
@@ -283,7 +284,11 @@ impl QueryScratch {
             buf("frcd-gpgpu frontier 0", fsize, B::STORAGE | B::COPY_DST),
             buf("frcd-gpgpu frontier 1", fsize, B::STORAGE),
         ];
-        let state = buf("frcd-gpgpu state", STATE_BYTES, B::STORAGE | B::COPY_SRC);
+        let state = buf(
+            "frcd-gpgpu state",
+            STATE_BYTES,
+            B::STORAGE | B::COPY_SRC | B::COPY_DST,
+        );
         let args = [0, 1, 2].map(|k| {
             buf(
                 &format!("frcd-gpgpu indirect args {k}"),
@@ -372,15 +377,6 @@ impl QueryScratch {
         // The triangle pass reads the list and writes the output, dispatched with `args[0]`;
         // its bindings 3 and 6-8 are unused (buffers other than `args[0]` fill the layout).
         let tri_bg = trav(&tris, &out, &frontier[0], 0);
-        let ctrl_bg = d.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("frcd-gpgpu control"),
-            layout: &ctx.pipes.ctrl_bgl,
-            entries: &[
-                crate::context::entry(0, &state),
-                crate::context::entry(1, &args[0]),
-                crate::context::entry(2, &params),
-            ],
-        });
         self.bufs = Some(Buffers {
             ctx_id: ctx.id,
             frontier_cap: self.frontier_cap,
@@ -399,7 +395,6 @@ impl QueryScratch {
             out_offset,
             trav_bg,
             tri_bg,
-            ctrl_bg,
         });
         Ok(())
     }
@@ -411,6 +406,15 @@ impl QueryScratch {
 fn level_cap(frontier_cap: u32, leaf_pairs: u64) -> u32 {
     let wrap = ((1u64 << 31) - 1) / (4 * leaf_pairs.max(1));
     (frontier_cap as u64).min(wrap) as u32
+}
+
+/// The x × y grid of 64-invocation workgroups for `m` invocations: ceil(m / 64) workgroups,
+/// x = min(groups, `max_groups`), y = ceil(groups / x) (0 × 0 for none); the shaders' `grid_x`
+/// and their raises of the next pass's arguments use the same formula.
+fn grid_args(m: u32, max_groups: u32) -> [u32; 2] {
+    let groups = m.div_ceil(crate::context::WG);
+    let x = groups.min(max_groups);
+    [x, if x > 0 { groups.div_ceil(x) } else { 0 }]
 }
 
 /// Entries one x × y dispatch of 64-invocation workgroups covers on `ctx`'s device (at most
@@ -639,7 +643,7 @@ fn pose_texels(info: &PairInfo, eps: f32) -> [[u32; 4]; 5] {
 
 /// Timestamps a batch writes with pass timers on (0: too deep to time).
 fn timer_count(p: &Prepared) -> u32 {
-    let n = p.levels + 3;
+    let n = p.levels + 2;
     if n <= MAX_TIMERS { n } else { 0 }
 }
 
@@ -974,7 +978,7 @@ impl GpuContext {
             }),
         );
         if n == 0 {
-            // Still a valid chain: `init` sets an empty frontier.
+            // Still a valid chain: the state below says the frontier is empty.
             self.queue
                 .write_buffer(&bufs.pairs, 0, &[0u8; PAIR_BYTES as usize]);
         } else {
@@ -986,8 +990,24 @@ impl GpuContext {
             self.queue
                 .write_buffer(&bufs.frontier[0], 0, bytemuck::cast_slice(&roots));
         }
-        // Levels 1 and 2 start from one workgroup (`init` writes level 0's arguments; each
-        // level resets those of the level after next).
+        // The batch starts with its roots (at most the level's capacity) in frontier 0 and
+        // every other counter at 0; `needed` holds the root count, so a batch with more roots
+        // than the capacity re-runs with a larger one. The triangle pass's arguments start
+        // empty, and the traversal raises them.
+        let roots = n.min(level_cap);
+        let start = State {
+            counts: [roots, 0, 0],
+            needed: n,
+            tri_args: [0, 1, 1],
+            ..State::default()
+        };
+        self.queue
+            .write_buffer(&bufs.state, 0, bytemuck::bytes_of(&start));
+        // Level 0 covers the roots; levels 1 and 2 start from one workgroup (each level raises
+        // the next one's arguments and resets those of the level after next).
+        let [x, y] = grid_args(roots, max_groups);
+        self.queue
+            .write_buffer(&bufs.args[0], 0, bytemuck::cast_slice(&[x, y, 1, 0]));
         for args in &bufs.args[1..] {
             self.queue
                 .write_buffer(args, 0, bytemuck::cast_slice(&[1u32, 1, 1, 0]));
@@ -1010,23 +1030,28 @@ impl GpuContext {
                 }
             };
             stamp(&mut pass, 0);
-            pass.set_pipeline(&self.pipes.init);
-            pass.set_bind_group(0, &bufs.ctrl_bg, &[]);
-            pass.dispatch_workgroups(1, 1, 1);
-            stamp(&mut pass, 1);
             // Level L reads frontier L % 2 and dispatches with the arguments the level before
-            // it wrote (`init` for level 0): one dispatch per level, no control pass between.
+            // it wrote (the CPU's for level 0): one dispatch per level, no control pass
+            // (each such single-invocation pass cost 20-70 µs on lavapipe).
             pass.set_pipeline(&self.pipes.traverse);
             pass.set_bind_group(0, &arena_bg, &[]);
             for level in 0..p.levels as usize {
                 pass.set_bind_group(1, &bufs.trav_bg[level % 6], &[]);
                 pass.dispatch_workgroups_indirect(&bufs.args[level % 3], 0);
-                stamp(&mut pass, level as u32 + 2);
+                stamp(&mut pass, level as u32 + 1);
             }
-            // Every listed triangle pair, one per invocation.
-            pass.set_pipeline(&self.pipes.prepare_tris);
-            pass.set_bind_group(0, &bufs.ctrl_bg, &[]);
-            pass.dispatch_workgroups(1, 1, 1);
+        }
+        // Every listed triangle pair, one per invocation, with the arguments the levels raised
+        // as they listed them (`State::tri_args`, copied to an indirect buffer: the triangle
+        // pass binds the state as storage, which a dispatch cannot also read its arguments
+        // from). A copy, not a control pass: no shader invocation, no worker hand-off on a
+        // software driver.
+        enc.copy_buffer_to_buffer(&bufs.state, TRI_ARGS_OFFSET, &bufs.args[0], 0, 12);
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("frcd-gpgpu triangle pass"),
+                timestamp_writes: None,
+            });
             pass.set_pipeline(if p.exact {
                 &self.pipes.triangles
             } else {
@@ -1035,7 +1060,9 @@ impl GpuContext {
             pass.set_bind_group(0, &arena_bg, &[]);
             pass.set_bind_group(1, &bufs.tri_bg, &[]);
             pass.dispatch_workgroups_indirect(&bufs.args[0], 0);
-            stamp(&mut pass, p.levels + 2);
+            if let Some((set, _)) = timers {
+                pass.write_timestamp(set, p.levels + 1);
+            }
         }
         enc.copy_buffer_to_buffer(&bufs.state, 0, &bufs.staging, 0, STATE_BYTES);
         if let Some((set, resolved)) = timers {
@@ -1168,16 +1195,14 @@ impl GpuContext {
             break (state, ticks, entries);
         };
         debug_assert_eq!(entries.len(), state.out as usize * 4);
-        if ticks.len() >= 3 {
+        if ticks.len() >= 2 {
             let period = f64::from(self.queue.get_timestamp_period());
             let span = |a: u64, b: u64| {
                 std::time::Duration::from_nanos((b.saturating_sub(a) as f64 * period) as u64)
             };
             let last = ticks.len() - 1;
-            answer.timings.gpu_levels = ticks[1..last]
-                .windows(2)
-                .map(|w| span(w[0], w[1]))
-                .collect();
+            answer.timings.gpu_levels =
+                ticks[..last].windows(2).map(|w| span(w[0], w[1])).collect();
             answer.timings.gpu_triangles = Some(span(ticks[last - 1], ticks[last]));
             answer.timings.gpu_total = Some(span(ticks[0], ticks[last]));
         }

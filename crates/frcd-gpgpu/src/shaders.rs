@@ -2,8 +2,6 @@
 
 /// One level of the pair-tree traversal: OBB separating-axis test and triangle test.
 pub const TRAVERSE: &str = include_str!("../shaders/traverse.wgsl");
-/// Single-invocation control passes: query start and the triangle pass's indirect arguments.
-pub const CONTROL: &str = include_str!("../shaders/control.wgsl");
 /// All-pairs box overlap of many bodies.
 pub const BOXES: &str = include_str!("../shaders/boxes.wgsl");
 
@@ -11,9 +9,8 @@ pub const BOXES: &str = include_str!("../shaders/boxes.wgsl");
 pub const SWEEP: &str = include_str!("../shaders/sweep.wgsl");
 
 /// Every shader of the crate as `(file name, source)`.
-pub const ALL: [(&str, &str); 4] = [
+pub const ALL: [(&str, &str); 3] = [
     ("traverse.wgsl", TRAVERSE),
-    ("control.wgsl", CONTROL),
     ("boxes.wgsl", BOXES),
     ("sweep.wgsl", SWEEP),
 ];

@@ -2,7 +2,7 @@
 // One declaration of each struct the shaders and the CPU share; the Rust mirrors are in
 // frcd-gpu's `layout` module and a test checks them against naga's reflection of this file.
 
-// ---- frcd-gpgpu: pair traversal (traverse.wgsl, control.wgsl) ----
+// ---- frcd-gpgpu: pair traversal (traverse.wgsl) ----
 
 // Counters of one batch's traversal. The traversal runs one dispatch per level and no control
 // pass between levels, so each level's frontier size has its own counter, by level mod 3: level
@@ -22,6 +22,9 @@ struct State {
     pairs_tested: u32,
     // Triangle pairs appended to the triangle list (may exceed the capacity: overflow).
     tris: atomic<u32>,
+    // The triangle pass's indirect arguments (x, y, z), raised by the traversal's
+    // reservations to cover the list (the CPU starts them at (0, 1, 1)).
+    tri_args: array<atomic<u32>, 3>,
 }
 
 // Which of `State.counts` (and of the three indirect-argument buffers) one traversal level

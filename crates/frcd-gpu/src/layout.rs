@@ -23,6 +23,9 @@ pub struct State {
     pub pairs_tested: u32,
     /// Triangle pairs appended to the triangle list (may exceed its capacity: overflow).
     pub tris: u32,
+    /// The triangle pass's indirect arguments `(x, y, z)` (the traversal raises them as it
+    /// lists triangle pairs; they start at `(0, 1, 1)`).
+    pub tri_args: [u32; 3],
 }
 
 /// `Level`: which counters and indirect-argument buffers one traversal level uses
@@ -172,7 +175,8 @@ pub fn mirrors() -> Vec<MirrorLayout> {
             needed: u32,
             levels: u32,
             pairs_tested: u32,
-            tris: u32
+            tris: u32,
+            tri_args: [u32; 3]
         }),
         m!(Level { slots: [u32; 4] }),
         m!(Params {
