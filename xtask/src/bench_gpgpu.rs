@@ -1118,19 +1118,10 @@ struct CheckerRow {
 /// `runs` sequences, for the CPU backend, GPGPU `check` and GPGPU `check_pipelined`; answers
 /// checked equal frame by frame.
 fn checker_row(n: usize, runs: usize, warm: Duration) -> Result<CheckerRow> {
-    use frcd_hybrid::{Backend, Checker, FrameState, GpuPolicy, Options, Pipeline};
+    use frcd_hybrid::{Checker, FrameState, Pipeline};
     let (bodies, frames) = checker_scene(n);
     let triangles: usize = bodies.iter().map(|b| b.mesh.triangle_count()).sum();
-    let gpu = Options {
-        backend: Backend::Gpgpu,
-        gpu: GpuPolicy::Require,
-        ..Options::default()
-    };
-    let cpu = Options {
-        backend: Backend::Cpu,
-        gpu: GpuPolicy::Off,
-        ..Options::default()
-    };
+    let (gpu, cpu) = checker_options();
     let c_cpu = Checker::new(bodies.clone(), &[], cpu)?;
     let c_gpu = Checker::new(bodies.clone(), &[], gpu.clone())?;
     let c_pipe = Checker::new(bodies, &[], gpu)?;
@@ -1227,6 +1218,22 @@ fn checker_row(n: usize, runs: usize, warm: Duration) -> Result<CheckerRow> {
     })
 }
 
+/// The checker section's options: GPGPU (GPU required) and CPU backend, defaults otherwise.
+fn checker_options() -> (frcd_hybrid::Options, frcd_hybrid::Options) {
+    use frcd_hybrid::{Backend, GpuPolicy, Options};
+    let gpu = Options {
+        backend: Backend::Gpgpu,
+        gpu: GpuPolicy::Require,
+        ..Options::default()
+    };
+    let cpu = Options {
+        backend: Backend::Cpu,
+        gpu: GpuPolicy::Off,
+        ..Options::default()
+    };
+    (gpu, cpu)
+}
+
 /// Frames of the checker section, `n` parts: the bodies and the 8 frames' poses.
 fn checker_scene(n: usize) -> (Vec<frcd_hybrid::BodySpec>, Vec<Vec<Pose>>) {
     let meshes: Vec<std::sync::Arc<frcd_geom::TriMesh>> = (0..n.min(4))
@@ -1247,18 +1254,9 @@ fn checker_scene(n: usize) -> (Vec<frcd_hybrid::BodySpec>, Vec<Vec<Pose>>) {
 /// turn (so host noise falls on all alike); prints each variant's median and the median of
 /// its per-run ratios to the default.
 fn checker_leaf_sizes(n: usize, runs: usize, leaves: &[u32]) -> Result<()> {
-    use frcd_hybrid::{Backend, Checker, FrameState, GpuPolicy, Options};
+    use frcd_hybrid::{Checker, FrameState, Options};
     let (bodies, frames) = checker_scene(n);
-    let gpu = Options {
-        backend: Backend::Gpgpu,
-        gpu: GpuPolicy::Require,
-        ..Options::default()
-    };
-    let cpu = Options {
-        backend: Backend::Cpu,
-        gpu: GpuPolicy::Off,
-        ..Options::default()
-    };
+    let (gpu, cpu) = checker_options();
     let reference = Checker::new(bodies.clone(), &[], cpu)?;
     let mut variants = vec![(
         "default".to_string(),
