@@ -694,7 +694,7 @@ pub fn run(mut o: Opts) -> Result<()> {
     for &n in &o.checker {
         checker_rows.push(checker_row(n, o.runs, warm)?);
         if !o.checker_gpu_leaves.is_empty() {
-            checker_leaf_sizes(n, o.runs, &o.checker_gpu_leaves)?;
+            checker_leaf_sizes(n, o.runs, warm, &o.checker_gpu_leaves)?;
         }
     }
 
@@ -1250,10 +1250,11 @@ fn checker_scene(n: usize) -> (Vec<frcd_hybrid::BodySpec>, Vec<Vec<Pose>>) {
 }
 
 /// GPGPU `check` per frame of the checker section with GPU trees of each of `leaves` against
-/// the default trees, in one process: every run times one 8-frame sequence of each variant in
-/// turn (so host noise falls on all alike); prints each variant's median and the median of
-/// its per-run ratios to the default.
-fn checker_leaf_sizes(n: usize, runs: usize, leaves: &[u32]) -> Result<()> {
+/// the default trees, in one process: after `warm` of untimed sequences, every run times one
+/// 8-frame sequence of each variant in turn, every other run in reverse order (so host noise
+/// falls on all alike); prints each variant's median and the median of its per-run ratios to
+/// the default.
+fn checker_leaf_sizes(n: usize, runs: usize, warm: Duration, leaves: &[u32]) -> Result<()> {
     use frcd_hybrid::{Checker, FrameState, Options};
     let (bodies, frames) = checker_scene(n);
     let (gpu, cpu) = checker_options();
@@ -1292,14 +1293,30 @@ fn checker_leaf_sizes(n: usize, runs: usize, leaves: &[u32]) -> Result<()> {
         }
     }
     let nf = frames.len() as f64;
+    // One 8-frame sequence of variant k, in ms per frame.
+    let mut sequence = |k: usize| {
+        let t0 = Instant::now();
+        for poses in &frames {
+            std::hint::black_box(variants[k].1.check(poses, &mut states[k]).expect("checked"));
+        }
+        t0.elapsed().as_secs_f64() * 1e3 / nf
+    };
+    // A hardware GPU first leaves its idle clock (as every GPU timing of this bench does).
+    let t0 = Instant::now();
+    while t0.elapsed() < warm {
+        (0..variants.len()).for_each(|k| {
+            sequence(k);
+        });
+    }
     let mut times: Vec<Vec<f64>> = vec![Vec::new(); variants.len()];
-    for _ in 0..runs {
-        for (k, ((_, c), st)) in variants.iter().zip(&mut states).enumerate() {
-            let t0 = Instant::now();
-            for poses in &frames {
-                std::hint::black_box(c.check(poses, st).expect("checked"));
-            }
-            times[k].push(t0.elapsed().as_secs_f64() * 1e3 / nf);
+    for run in 0..runs {
+        // Every other run in reverse order, so that no variant always goes first.
+        let mut order: Vec<usize> = (0..variants.len()).collect();
+        if run % 2 == 1 {
+            order.reverse();
+        }
+        for k in order {
+            times[k].push(sequence(k));
         }
     }
     let median = |mut v: Vec<f64>| {

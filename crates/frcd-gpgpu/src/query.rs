@@ -992,8 +992,9 @@ impl GpuContext {
         }
         // The batch starts with its roots (at most the level's capacity) in frontier 0 and
         // every other counter at 0; `needed` holds the root count, so a batch with more roots
-        // than the capacity re-runs with a larger one. The triangle pass's arguments start
-        // empty, and the traversal raises them.
+        // than the level's capacity (only where `level_cap` holds it below the scratch's) is
+        // refused after its run. The triangle pass's arguments start empty, and the traversal
+        // raises them.
         let roots = n.min(level_cap);
         let start = State {
             counts: [roots, 0, 0],

@@ -96,8 +96,10 @@ pub struct Options {
     /// [`Options::build`]). Default: at most 2 triangles per leaf (frcd-obb's default, the
     /// trees every frcd-gpgpu benchmark and real-GPU figure used): on the software driver
     /// (lavapipe, 2 cores) the 64-part checker frame took 0.83-0.86 of its time with the
-    /// collision trees' leaves of 4 (`cargo xtask bench gpgpu --checker-gpu-leaves 2`, three
-    /// runs, 2026-12-02); a leaf pair of 4 lists up to 16 triangle pairs for the triangle pass.
+    /// collision trees' leaves of 4, timed in one process by
+    /// `cargo xtask bench gpgpu --boxes-only --bodies 2 --checker-parts 64 --checker-gpu-leaves 1,2,3`
+    /// and twice with `2,3` (2026-12-02); a leaf pair of 4 lists up to 16 triangle pairs for
+    /// the triangle pass.
     /// The answers are the same either way: the GPU reports triangle pairs by the meshes' own
     /// indices, and the CPU re-decides each exactly.
     pub gpu_build: Option<BuildOptions>,
