@@ -106,6 +106,15 @@ pub struct Opts {
         value_delimiter = ','
     )]
     pub checker_gpu_leaves: Vec<u32>,
+    /// Checker section: also time GPGPU `check` with these CPU fronts (box tests per level,
+    /// `frcd_hybrid::Options::gpu_host_front`; 0: the GPU starts at the roots), alternated
+    /// run by run with the default's in one process (answers checked equal); empty: skipped.
+    #[arg(
+        long = "checker-host-front",
+        value_name = "TESTS,..",
+        value_delimiter = ','
+    )]
+    pub checker_host_front: Vec<u32>,
     /// Time every GPU pass of the batches with GPU timestamps (where the adapter has
     /// timestamps inside passes) for the breakdown table; the host's split (waiting for the
     /// GPU, the CPU's re-decision) is always written.
@@ -116,6 +125,11 @@ pub struct Opts {
     /// software ones, or `FRCD_GPGPU_EXACT_OFFSETS`).
     #[arg(long, value_name = "on|off", value_parser = parse_on_off)]
     pub exact_offsets: Option<bool>,
+    /// Box tests per level the CPU may take off the GPU at the top of each batch's pair trees
+    /// (`GpuContext::set_host_front`; 0: none); left out, the context's default (4,096 on a
+    /// software adapter, 0 on a hardware one).
+    #[arg(long = "host-front", value_name = "TESTS")]
+    pub host_front: Option<u32>,
     /// Before each GPU timing, repeat the timed work for this many milliseconds, so that a
     /// hardware GPU has left its idle clock (an H200 idles at 345 MHz against 1,980 under load,
     /// and a few milliseconds of work every few seconds never raise it). Left out: 500 on a
@@ -143,6 +157,11 @@ struct Breakdown {
     batch_ms: f64,
     wait_ms: f64,
     decide_ms: f64,
+    /// The CPU's descent of the top of the pair trees (`GpuContext::set_host_front`).
+    front_ms: f64,
+    /// Levels the CPU descended, then those the GPU ran.
+    host_levels: u32,
+    gpu_levels: u32,
     /// GPU chain, its traversal levels, its triangle pass (pass timers only).
     gpu_ms: Option<[f64; 3]>,
     /// Each traversal level's GPU time (pass timers only; else empty).
@@ -178,6 +197,9 @@ impl Breakdown {
             batch_ms,
             wait_ms: med(&|t| ms(t.wait)),
             decide_ms: med(&|t| ms(t.decide)),
+            front_ms: med(&|t| ms(t.host_front)),
+            host_levels: got.host_levels,
+            gpu_levels: got.levels,
             gpu_ms: timed.then(|| {
                 [
                     med(&|t| ms(t.gpu_total.unwrap_or_default())),
@@ -212,8 +234,16 @@ impl Breakdown {
             .clock_mhz
             .map_or(String::new(), |c| format!(", SM clock after {c} MHz"));
         format!(
-            "{}: batch {:.2} ms = wait {:.2} ms ({gpu}) + CPU re-decision {:.2} ms of {} reported pairs ({} uncertain){clock}",
-            self.what, self.batch_ms, self.wait_ms, self.decide_ms, self.reported, self.uncertain
+            "{}: batch {:.2} ms = CPU front {:.2} ms ({} levels) + wait {:.2} ms ({} GPU levels; {gpu}) + CPU re-decision {:.2} ms of {} reported pairs ({} uncertain){clock}",
+            self.what,
+            self.batch_ms,
+            self.front_ms,
+            self.host_levels,
+            self.wait_ms,
+            self.gpu_levels,
+            self.decide_ms,
+            self.reported,
+            self.uncertain
         )
     }
 }
@@ -468,6 +498,9 @@ pub fn run(mut o: Opts) -> Result<()> {
     if let Some(on) = o.exact_offsets {
         ctx.set_exact_offsets(on);
     }
+    if let Some(tests) = o.host_front {
+        ctx.set_host_front(tests);
+    }
     let warm_ms = o
         .gpu_warmup_ms
         .unwrap_or(if ctx.is_software() { 0 } else { 500 });
@@ -693,8 +726,28 @@ pub fn run(mut o: Opts) -> Result<()> {
     let mut checker_rows: Vec<CheckerRow> = Vec::new();
     for &n in &o.checker {
         checker_rows.push(checker_row(n, o.runs, warm)?);
-        if !o.checker_gpu_leaves.is_empty() {
-            checker_leaf_sizes(n, o.runs, warm, &o.checker_gpu_leaves)?;
+        // Variants of the GPGPU options, timed against the default in one process.
+        let (gpu, _) = checker_options();
+        let mut changes: Vec<(String, frcd_hybrid::Options)> = Vec::new();
+        for &l in &o.checker_gpu_leaves {
+            let o = frcd_hybrid::Options {
+                gpu_build: Some(frcd_obb::BuildOptions {
+                    max_leaf_triangles: l,
+                    ..gpu.build
+                }),
+                ..gpu.clone()
+            };
+            changes.push((format!("GPU leaves of {l}"), o));
+        }
+        for &t in &o.checker_host_front {
+            let o = frcd_hybrid::Options {
+                gpu_host_front: Some(t),
+                ..gpu.clone()
+            };
+            changes.push((format!("a CPU front of {t} box tests per level"), o));
+        }
+        if !changes.is_empty() {
+            checker_variants(n, o.runs, warm, &changes)?;
         }
     }
 
@@ -1249,13 +1302,18 @@ fn checker_scene(n: usize) -> (Vec<frcd_hybrid::BodySpec>, Vec<Vec<Pose>>) {
     (bodies, (0..8).map(|f| frame_poses(n, f)).collect())
 }
 
-/// GPGPU `check` per frame of the checker section with GPU trees of each of `leaves` against
-/// the default trees, in one process: after `warm` of untimed sequences, every run times one
-/// 8-frame sequence of each variant in turn, every other run in reverse order (so host noise
-/// falls on all alike); prints each variant's median and the median of its per-run ratios to
-/// the default.
-fn checker_leaf_sizes(n: usize, runs: usize, warm: Duration, leaves: &[u32]) -> Result<()> {
-    use frcd_hybrid::{Checker, FrameState, Options};
+/// GPGPU `check` per frame of the checker section with each of `variants` (a name and how it
+/// changes the GPGPU options) against the default options, in one process: after `warm` of
+/// untimed sequences, every run times one 8-frame sequence of each variant in turn, every other
+/// run in reverse order (so host noise falls on all alike); prints each variant's median and
+/// the median of its per-run ratios to the default.
+fn checker_variants(
+    n: usize,
+    runs: usize,
+    warm: Duration,
+    changes: &[(String, frcd_hybrid::Options)],
+) -> Result<()> {
+    use frcd_hybrid::{Checker, FrameState};
     let (bodies, frames) = checker_scene(n);
     let (gpu, cpu) = checker_options();
     let reference = Checker::new(bodies.clone(), &[], cpu)?;
@@ -1263,18 +1321,8 @@ fn checker_leaf_sizes(n: usize, runs: usize, warm: Duration, leaves: &[u32]) -> 
         "default".to_string(),
         Checker::new(bodies.clone(), &[], gpu.clone())?,
     )];
-    for &l in leaves {
-        let o = Options {
-            gpu_build: Some(frcd_obb::BuildOptions {
-                max_leaf_triangles: l,
-                ..gpu.build
-            }),
-            ..gpu.clone()
-        };
-        variants.push((
-            format!("GPU leaves of {l}"),
-            Checker::new(bodies.clone(), &[], o)?,
-        ));
+    for (name, o) in changes {
+        variants.push((name.clone(), Checker::new(bodies.clone(), &[], o.clone())?));
     }
     let key = |r: &frcd_hybrid::FrameResult| -> Vec<ContactKey> {
         r.contacts

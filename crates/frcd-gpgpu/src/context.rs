@@ -96,6 +96,10 @@ pub const EXACT_OFFSETS_ENV: &str = "FRCD_GPGPU_EXACT_OFFSETS";
 /// uncertain pairs 70-200× at no measurable cost to the triangle pass), off for software ones
 /// (on lavapipe its integer work made the triangle pass about twice as long, more than the CPU
 /// re-decision it saves there; see docs/performance/gpu.md), unless [`EXACT_OFFSETS_ENV`] says.
+/// [`GpuContext::set_host_front`]'s default on software adapters: box tests per level the CPU
+/// takes off the GPU at the top of a batch's pair trees.
+pub const HOST_FRONT_SOFTWARE: u32 = 2048;
+
 fn exact_offsets_default(info: &wgpu::AdapterInfo) -> bool {
     match std::env::var(EXACT_OFFSETS_ENV).as_deref() {
         Ok("1") => true,
@@ -140,6 +144,9 @@ pub struct GpuContext {
     pub(crate) recheck: Recheck,
     /// The triangle pass's exact reference-point path ([`GpuContext::set_exact_offsets`]).
     pub(crate) exact_offsets: bool,
+    /// Box tests per level the CPU may take off the GPU at the top of a batch's pair trees
+    /// ([`GpuContext::set_host_front`]).
+    pub(crate) host_front: u32,
     /// Last field: the GPU objects above are dropped under `frcd_gpu::creation_lock` (see the
     /// `Drop` impl).
     _release: frcd_gpu::ReleaseCreationLock,
@@ -298,6 +305,11 @@ impl GpuContext {
     ) -> Result<Self, GpuError> {
         let info = device.adapter_info();
         let exact_offsets = exact_offsets_default(&info);
+        let host_front = if info.device_type == wgpu::DeviceType::Cpu {
+            HOST_FRONT_SOFTWARE
+        } else {
+            0
+        };
         let limits = device.limits();
         check_limits(&limits, &info.name)?;
         // A driver that rejects a shader or pipeline gives a typed error, not a panic.
@@ -344,6 +356,7 @@ impl GpuContext {
             pass_timers: false,
             recheck: Recheck::All,
             exact_offsets,
+            host_front,
             _release: frcd_gpu::ReleaseCreationLock::default(),
         })
     }
@@ -421,6 +434,22 @@ impl GpuContext {
     /// Whether the exact reference-point path is on ([`GpuContext::set_exact_offsets`]).
     pub fn exact_offsets(&self) -> bool {
         self.exact_offsets
+    }
+
+    /// Sets how much of the top of a batch's pair trees the CPU descends before the GPU
+    /// starts: level by level, while a level's box tests over the whole batch stay within
+    /// `tests` (0: none, the GPU starts at the roots). Each level taken off the GPU is one
+    /// dispatch fewer; the answers are the same. Default: [`HOST_FRONT_SOFTWARE`] on software
+    /// adapters such as lavapipe, where a level costs a dispatch's fixed 100-200 µs whatever
+    /// its size; 0 on hardware adapters, where no figure says it pays (not measured yet).
+    /// [`crate::BatchTimings::host_front`] is the time it takes.
+    pub fn set_host_front(&mut self, tests: u32) {
+        self.host_front = tests;
+    }
+
+    /// The CPU's share of the top of the pair trees ([`GpuContext::set_host_front`]).
+    pub fn host_front(&self) -> u32 {
+        self.host_front
     }
 
     /// Whether batches time their GPU passes ([`GpuContext::enable_pass_timers`]).

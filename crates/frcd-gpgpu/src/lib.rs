@@ -60,6 +60,7 @@ mod context;
 #[cfg(test)]
 mod emulate;
 mod error;
+mod front;
 mod mesh;
 #[doc(hidden)]
 pub mod pack;
@@ -69,7 +70,9 @@ pub mod shaders;
 mod sweep;
 
 pub use boxes::{BodyPairs, BoxScratch};
-pub use context::{EXACT_OFFSETS_ENV, GpuContext, HeadlessOptions, Recheck, requirements};
+pub use context::{
+    EXACT_OFFSETS_ENV, GpuContext, HOST_FRONT_SOFTWARE, HeadlessOptions, Recheck, requirements,
+};
 pub use error::GpuError;
 pub use mesh::{ArenaOptions, GpuMesh, MAX_LEAF_TRIANGLES};
 pub use pack::{MAX_MAGNITUDE, TexLayout};

@@ -323,6 +323,9 @@ pub struct GpuMesh {
     pub(crate) grid: Option<i32>,
     /// The largest deviation of the nodes' f32 axes from orthonormal (`pack::PackedTree::eps`).
     pub(crate) eps: f32,
+    /// The tree and its packed order, for the CPU's descent of the top of each pair tree
+    /// (`front.rs`).
+    pub(crate) host: std::sync::Arc<crate::front::HostTree>,
     bytes: u64,
 }
 
@@ -394,6 +397,9 @@ impl GpuContext {
             arena.nodes.layout.items_per_row,
             arena.tris.layout.items_per_row,
         )?;
+        // Before the arena is touched: a refusal leaves it as it was.
+        let (bfs, first_child) = crate::pack::sibling_order(tree)?;
+        let host = crate::front::HostTree::new(tree, &bfs, &first_child);
         let node_rows = node_layout.rows_per_layer as u64;
         let tri_rows = tri_layout.rows_per_layer as u64;
         let (node_row, g1) = arena.nodes.alloc(self, node_rows)?;
@@ -435,6 +441,7 @@ impl GpuContext {
             mesh: tree.mesh().clone(),
             grid,
             eps,
+            host,
             bytes,
         })
     }

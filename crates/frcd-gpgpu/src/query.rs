@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 /// Bit 31 of a frontier entry's node word: the node itself, not its first child
 /// (`traverse.wgsl`).
-const ONE_NODE: u32 = 0x8000_0000;
+pub(crate) const ONE_NODE: u32 = 0x8000_0000;
 /// Bit 31 of an output entry's third word: the GPU could not decide the pair.
 const UNCERTAIN_FLAG: u32 = 0x8000_0000;
 /// Bytes of the `State` struct shared with the shaders (prelude).
@@ -91,6 +91,9 @@ pub struct GpuBatch {
     pub node_pairs_tested: u64,
     /// Traversal levels that had work.
     pub levels: u32,
+    /// Levels of the pair trees the CPU descended before the GPU's first
+    /// ([`GpuContext::set_host_front`]; 0 when off).
+    pub host_levels: u32,
     /// Submissions made by frcd-gpgpu for this batch (1; 0 when recorded into the caller's
     /// encoder; plus one per overflow re-run).
     pub submissions: u32,
@@ -109,6 +112,7 @@ impl PartialEq for GpuBatch {
             results,
             node_pairs_tested,
             levels,
+            host_levels,
             submissions,
             readbacks,
             reruns,
@@ -117,6 +121,7 @@ impl PartialEq for GpuBatch {
         *results == other.results
             && *node_pairs_tested == other.node_pairs_tested
             && *levels == other.levels
+            && *host_levels == other.host_levels
             && *submissions == other.submissions
             && *readbacks == other.readbacks
             && *reruns == other.reruns
@@ -153,6 +158,9 @@ pub struct BatchTimings {
     /// The CPU's part after the readback: decoding, the exact re-decision of every reported
     /// triangle pair, sorting.
     pub decide: std::time::Duration,
+    /// The CPU's descent of the top of the pair trees before the submission
+    /// ([`GpuContext::set_host_front`]; zero when off).
+    pub host_front: std::time::Duration,
     /// GPU time of each traversal level (the level's test and the next level's arguments), in
     /// order; empty without pass timers. Levels past the last with work take almost nothing.
     pub gpu_levels: Vec<std::time::Duration>,
@@ -243,9 +251,9 @@ impl QueryScratch {
         (self.frontier_cap, self.output_cap)
     }
 
-    fn ensure(&mut self, ctx: &GpuContext, pairs: u32) -> Result<(), GpuError> {
+    fn ensure(&mut self, ctx: &GpuContext, pairs: u32, roots: u32) -> Result<(), GpuError> {
         self.pair_cap = self.pair_cap.max(pairs.next_power_of_two());
-        self.frontier_cap = self.frontier_cap.max(pairs);
+        self.frontier_cap = self.frontier_cap.max(roots);
         if let Some(b) = &self.bufs {
             if b.ctx_id != ctx.id {
                 return Err(GpuError::ForeignObject("QueryScratch"));
@@ -441,6 +449,12 @@ struct Prepared {
     leaf_pairs: u64,
     /// The triangle pass's exact path is on ([`GpuContext::set_exact_offsets`]).
     exact: bool,
+    /// The first level's entries (the roots, or the CPU's front: `front.rs`).
+    roots: Vec<[u32; 4]>,
+    /// Box tests the CPU made descending the front, and the time it took.
+    host_tests: u64,
+    host_steps: u32,
+    host_time: std::time::Duration,
 }
 
 /// Reported pairs below which the re-decision stays on the calling thread. Measured on an H200's
@@ -916,6 +930,10 @@ impl GpuContext {
             levels: 0,
             leaf_pairs: 0,
             exact: self.exact_offsets,
+            roots: Vec::new(),
+            host_tests: 0,
+            host_steps: 0,
+            host_time: std::time::Duration::ZERO,
         };
         for (k, &(a, pose_a, b, pose_b)) in pairs.iter().enumerate() {
             for m in [a, b] {
@@ -945,9 +963,17 @@ impl GpuContext {
                 .push(crate::pack::round_up(a.eps as f64 + b.eps as f64));
             p.frames.push(frame);
             p.tris.push((a.mesh.clone(), b.mesh.clone()));
-            p.levels = p.levels.max(a.depth.max(b.depth));
             p.leaf_pairs = p.leaf_pairs.max(a.max_leaf as u64 * b.max_leaf as u64);
         }
+        let started = std::time::Instant::now();
+        let front = crate::front::host_front(pairs, self.host_front);
+        if self.host_front > 0 {
+            p.host_time = started.elapsed();
+        }
+        p.levels = front.levels;
+        p.roots = front.entries;
+        p.host_tests = front.tests;
+        p.host_steps = front.steps;
         Ok(p)
     }
 
@@ -960,7 +986,8 @@ impl GpuContext {
         scratch: &mut QueryScratch,
     ) -> Result<(), GpuError> {
         let n = p.frames.len() as u32;
-        scratch.ensure(self, n)?;
+        let n_roots = p.roots.len() as u32;
+        scratch.ensure(self, n, n_roots)?;
         let bufs = scratch.bufs.as_ref().expect("ensured");
         // One level lists at most its entries × 4 child pairs × the largest leaf pair's
         // triangle pairs; every reservation that takes the triangle counter past 2^31 brings it
@@ -985,20 +1012,22 @@ impl GpuContext {
             self.queue
                 .write_buffer(&bufs.pairs, 0, bytemuck::cast_slice(&p.infos));
             write_poses(&self.queue, &bufs.poses, &p.infos, &p.eps);
-            // Each root as itself (bit 31: the node, not its first child; `traverse.wgsl`).
-            let roots: Vec<[u32; 4]> = (0..n).map(|k| [k, ONE_NODE, ONE_NODE, 0]).collect();
+        }
+        if n_roots > 0 {
+            // The roots as themselves (bit 31: the node, not its first child;
+            // `traverse.wgsl`), or the CPU's front.
             self.queue
-                .write_buffer(&bufs.frontier[0], 0, bytemuck::cast_slice(&roots));
+                .write_buffer(&bufs.frontier[0], 0, bytemuck::cast_slice(&p.roots));
         }
         // The batch starts with its roots (at most the level's capacity) in frontier 0 and
         // every other counter at 0; `needed` holds the root count, so a batch with more roots
         // than the level's capacity (only where `level_cap` holds it below the scratch's) is
         // refused after its run. The triangle pass's arguments start empty, and the traversal
         // raises them.
-        let roots = n.min(level_cap);
+        let roots = n_roots.min(level_cap);
         let start = State {
             counts: [roots, 0, 0],
-            needed: n,
+            needed: n_roots,
             tri_args: [0, 1, 1],
             ..State::default()
         };
@@ -1191,8 +1220,9 @@ impl GpuContext {
                 )));
             }
             answer.levels = state.levels;
-            // Four slots per frontier entry (`traverse.wgsl`).
-            answer.node_pairs_tested = 4 * state.pairs_tested as u64;
+            answer.host_levels = p.host_steps;
+            // Four slots per frontier entry (`traverse.wgsl`), plus the CPU's front.
+            answer.node_pairs_tested = 4 * state.pairs_tested as u64 + p.host_tests;
             break (state, ticks, entries);
         };
         debug_assert_eq!(entries.len(), state.out as usize * 4);
@@ -1219,6 +1249,7 @@ impl GpuContext {
         }
         answer.results = results;
         answer.timings.decide = deciding.elapsed();
+        answer.timings.host_front = p.host_time;
         Ok(std::mem::take(answer))
     }
 }
@@ -1271,6 +1302,10 @@ mod tests {
             levels: 0,
             leaf_pairs: 0,
             exact: false,
+            roots: Vec::new(),
+            host_tests: 0,
+            host_steps: 0,
+            host_time: std::time::Duration::ZERO,
         }
     }
 
@@ -1380,6 +1415,10 @@ mod tests {
             levels: 0,
             leaf_pairs: 0,
             exact: false,
+            roots: Vec::new(),
+            host_tests: 0,
+            host_steps: 0,
+            host_time: std::time::Duration::ZERO,
         };
         let flagged = |i: u32, j: u32| (i * 7 + j).is_multiple_of(5);
         let mut entries = Vec::new();

@@ -288,8 +288,10 @@ fn one_submission_and_one_readback_per_query() {
         assert_eq!(ctx.submissions() - s0, 1, "query {k}");
         assert_eq!(ctx.readbacks() - r0, 1, "query {k}");
         assert_eq!((got.submissions, got.readbacks, got.reruns), (1, 1, 0));
-        assert_eq!(got.pairs, oracle::pairs(&a.mesh, &pa, &a.mesh, &pb));
-        assert!(got.levels >= 1 && got.node_pairs_tested >= 1);
+        let want = oracle::pairs(&a.mesh, &pa, &a.mesh, &pb);
+        assert_eq!(got.pairs, want);
+        // (Spheres apart by their bounds are refused before any box test.)
+        assert!(want.is_empty() || got.node_pairs_tested >= 1);
     }
 }
 
@@ -350,7 +352,11 @@ fn level_counts_add_up(ctx: &GpuContext, a: &Body, poses: &[(Pose, Pose)]) {
 
 #[test]
 fn level_counters_add_up_and_reused_scratch_changes_nothing() {
-    let Some(ctx) = shared() else { return };
+    // The GPU's own levels from the roots: no CPU front (whose budget is the batch's, so a
+    // batch's front is not the sum of its pairs' fronts).
+    let Some(mut ctx) = new_context() else { return };
+    ctx.set_host_front(0);
+    let ctx = &ctx;
     let a = body(ctx, shapes::icosphere(1.0, 3));
     let poses: Vec<(Pose, Pose)> = (0..6)
         .map(|k| {
@@ -740,14 +746,19 @@ fn the_exact_paths_default_follows_the_adapter() {
 /// GPU fields stay empty; the host's wait and re-decision times are always filled.
 #[test]
 fn pass_timers_time_every_level_and_leave_the_answer_alone() {
-    let Some(plain) = new_context() else { return };
-    let timed = match GpuContext::headless_with(&HeadlessOptions {
+    let Some(mut plain) = new_context() else {
+        return;
+    };
+    let mut timed = match GpuContext::headless_with(&HeadlessOptions {
         pass_timers: true,
         ..Default::default()
     }) {
         Ok(c) => c,
         Err(e) => panic!("a context that could be made without timers fails with them: {e}"),
     };
+    // Every level of the trees on the GPU (no CPU front), so there is one time per level.
+    plain.set_host_front(0);
+    timed.set_host_front(0);
     let a = shapes::icosphere(1.0, 3);
     let b = shapes::torus(0.8, 0.25, 48, 16).expect("torus");
     let pose_b = Pose::new(DVec3::new(0.7, 0.1, 0.0), DQuat::from_rotation_x(0.7));
@@ -1050,7 +1061,9 @@ fn two_dimensional_grids_without_indirect_validation() {
     }) else {
         return;
     };
-    let ctx = GpuContext::from_adapter(&adapter, device, queue).expect("limits suffice");
+    let mut ctx = GpuContext::from_adapter(&adapter, device, queue).expect("limits suffice");
+    // Levels of more than one row need the GPU to start at the roots (no CPU front).
+    ctx.set_host_front(0);
     let a = body(&ctx, shapes::icosphere(1.0, 3));
     let poses: Vec<(Pose, Pose)> = (0..6)
         .map(|k| {
@@ -1386,4 +1399,74 @@ fn batches_beyond_the_pose_texture_are_a_typed_error() {
         .unwrap();
     let want = oracle::pairs(&a.mesh, &pa, &a.mesh, &pb);
     assert!(small.results.iter().all(|r| r.pairs == want));
+}
+
+/// The CPU's front (`GpuContext::set_host_front`): whatever its budget, every batch equals the
+/// oracle pair for pair, the GPU runs no more levels than from the roots, and a budget large
+/// enough to reach the leaves leaves the GPU one level (the leaf pairs' boxes, then their
+/// triangles); the CPU's box tests are counted and timed.
+#[test]
+fn the_cpu_front_changes_no_answer_and_takes_levels_off_the_gpu() {
+    let Some(mut ctx) = new_context() else { return };
+    let a = body(&ctx, shapes::icosphere(1.0, 3));
+    let b = body(&ctx, shapes::torus(0.8, 0.25, 48, 16).expect("torus"));
+    // Touching, deep, grazing and apart pairs in one batch.
+    let poses: Vec<(Pose, Pose)> = [
+        DVec3::new(0.7, 0.1, 0.0),
+        DVec3::new(0.1, 0.0, 0.05),
+        DVec3::new(1.9, 0.3, 0.2),
+        DVec3::new(6.0, 0.0, 0.0),
+        DVec3::new(0.0, 1.0, 0.3),
+    ]
+    .iter()
+    .enumerate()
+    .map(|(k, &t)| {
+        (
+            Pose::from_translation(DVec3::X * 10.0 * k as f64),
+            Pose::new(
+                DVec3::X * 10.0 * k as f64 + t,
+                DQuat::from_rotation_x(0.3 * k as f64),
+            ),
+        )
+    })
+    .collect();
+    let want: Vec<_> = poses
+        .iter()
+        .map(|(pa, pb)| oracle::pairs(&a.mesh, pa, &b.mesh, pb))
+        .collect();
+    assert!(want.iter().filter(|w| !w.is_empty()).count() >= 3);
+    assert!(want.iter().any(|w| w.is_empty()));
+    let batch: Vec<_> = poses
+        .iter()
+        .map(|(pa, pb)| (&a.gpu, pa, &b.gpu, pb))
+        .collect();
+    let mut run = |budget: u32| {
+        ctx.set_host_front(budget);
+        let got = ctx
+            .collide_batch(&batch, &mut QueryScratch::default())
+            .expect("batch");
+        for (k, (r, w)) in got.results.iter().zip(&want).enumerate() {
+            assert_eq!(&r.pairs, w, "budget {budget}, pair {k}");
+        }
+        got
+    };
+    let roots = run(0);
+    assert_eq!(roots.timings.host_front, std::time::Duration::ZERO);
+    let depth = a.gpu.depth().max(b.gpu.depth());
+    assert_eq!((roots.levels, roots.host_levels), (depth, 0));
+    let mut last = roots.levels;
+    for budget in [4, 64, 1024, 16384] {
+        let got = run(budget);
+        assert!(got.levels <= last, "budget {budget}: {} levels", got.levels);
+        assert!(got.timings.host_front > std::time::Duration::ZERO);
+        // (Four box tests cannot take the first step of five pairs.)
+        assert!(budget < 64 || got.host_levels > 0, "budget {budget}");
+        last = got.levels;
+    }
+    assert!(last < roots.levels);
+    // Down to the leaves on the CPU: the GPU tests the leaf pairs only.
+    let leaves = run(u32::MAX);
+    assert_eq!(leaves.levels, 1);
+    assert!(leaves.host_levels + 1 >= last);
+    assert!(leaves.node_pairs_tested > 0);
 }

@@ -161,7 +161,10 @@ impl Checker {
     #[cfg(feature = "gpgpu")]
     fn make_gpgpu(&self) -> Result<Gpgpu, GpuFailure> {
         use rayon::prelude::*;
-        let ctx = frcd_gpgpu::GpuContext::headless()?;
+        let mut ctx = frcd_gpgpu::GpuContext::headless()?;
+        if let Some(tests) = self.options.gpu_host_front {
+            ctx.set_host_front(tests);
+        }
         let meshes = match self.options.gpu_build {
             // Trees of their own for the GPU, dropped once packed (the upload keeps the mesh).
             Some(gb) if gb != self.options.build => self

@@ -103,6 +103,12 @@ pub struct Options {
     /// The answers are the same either way: the GPU reports triangle pairs by the meshes' own
     /// indices, and the CPU re-decides each exactly.
     pub gpu_build: Option<BuildOptions>,
+    /// Box tests per level the CPU may take off the GPU at the top of each GPU pair batch
+    /// (frcd-gpgpu's `GpuContext::set_host_front`, feature `gpgpu`): the batch's first
+    /// levels, too small to fill a GPU, are descended on the CPU and each saves a dispatch;
+    /// the answers are the same. `None`: the context's default (2,048 on a software adapter
+    /// such as lavapipe, 0 on a hardware one); `Some(0)`: the GPU starts at the roots.
+    pub gpu_host_front: Option<u32>,
     /// OBB trees for the clearance distance searches, built only when a clearance threshold is
     /// set (`None`: the collision trees of [`Options::build`]). Default: at most 1 triangle per
     /// leaf: on the bogie demo the brake blocks' distance searches against the wheel treads
@@ -138,6 +144,7 @@ impl Default for Options {
                 ..BuildOptions::default()
             },
             gpu_build: Some(BuildOptions::default()),
+            gpu_host_front: None,
             clearance_build: Some(BuildOptions {
                 max_leaf_triangles: 1,
                 ..BuildOptions::default()

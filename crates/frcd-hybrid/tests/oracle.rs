@@ -323,11 +323,23 @@ fn exact_gpgpu_and_gpu_heavy_hybrid_equal_oracle() {
         &s,
         Options {
             gpu_build: None,
-            ..forced
+            ..forced.clone()
         },
     )
     .expect("gpgpu backend on the collision trees");
     assert_eq!(want, got);
+    // The GPU from the roots (no CPU front) and the CPU down to the leaves: the same answers.
+    for front in [0, u32::MAX] {
+        let (want, got, _) = run(
+            &s,
+            Options {
+                gpu_host_front: Some(front),
+                ..forced.clone()
+            },
+        )
+        .expect("gpgpu backend");
+        assert_eq!(want, got, "CPU front of {front} box tests per level");
+    }
     // A cost model in which the GPU is free: hybrid puts broad and narrow phase on it.
     let cheap_gpu = CostModel {
         gpu_broad_us: Some(0.0),

@@ -52,8 +52,8 @@ pub use frcd_geom::fit::FitMethod;
 pub use frcd_tritri::{Contact, Method};
 pub use isa::{set_wide_traversal_isa, wide_traversal_isa};
 pub use query::{
-    Collision, Containment, Counters, Mode, PairCache, RelativeFrame, Request, TopVolume, collide,
-    collide_cached, containment,
+    Collision, Containment, Counters, Mode, PairCache, PairFront, RelativeFrame, Request,
+    TopVolume, collide, collide_cached, containment,
 };
 #[cfg(feature = "serde")]
 pub use saved::{LoadError, SavedTree};

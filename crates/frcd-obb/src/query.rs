@@ -9,6 +9,7 @@
 //! witness neighbourhood).
 
 mod cache;
+mod front;
 mod hits;
 #[cfg(test)]
 mod tests;
@@ -16,6 +17,7 @@ mod traverse;
 
 pub use cache::PairCache;
 use cache::{NEIGHBOURHOOD_LEVELS, ancestor, walk_or_traverse};
+pub use front::PairFront;
 use hits::{AllHits, FirstHit};
 use traverse::{Ctx, PooledStack, ordered_steps};
 
