@@ -839,7 +839,7 @@ pub fn run(mut o: Opts) -> Result<()> {
     writeln!(md, "# GPGPU pipeline vs CPU OBB traversal\n")?;
     writeln!(
         md,
-        "Adapter: **{}** ({:?}, {:?}, driver {} {}). CPU: {} rayon threads. `cargo xtask bench gpgpu`, median of {} runs. Triangle pass: exact reference-point offsets {}. GPU warm-up: {} ms of the timed work before each GPU timing (`--gpu-warmup-ms`; 0: a cold GPU, at whatever clock idling left it).\n",
+        "Adapter: **{}** ({:?}, {:?}, driver {} {}). CPU: {} rayon threads. `cargo xtask bench gpgpu`, median of {} runs. Triangle pass: exact reference-point offsets {}. CPU front: {} (`--host-front`). GPU warm-up: {} ms of the timed work before each GPU timing (`--gpu-warmup-ms`; 0: a cold GPU, at whatever clock idling left it).\n",
         info.name,
         info.backend,
         info.device_type,
@@ -848,6 +848,12 @@ pub fn run(mut o: Opts) -> Result<()> {
         threads,
         o.runs,
         if ctx.exact_offsets() { "on" } else { "off" },
+        match ctx.host_front() {
+            0 => "off (the GPU starts at the roots)".to_string(),
+            t => format!(
+                "the CPU descends the top of each batch's pair trees while a level takes at most {t} box tests"
+            ),
+        },
         warm_ms
     )?;
     if let (Some(a), Some(b)) = (&load_start, &load_end) {

@@ -443,6 +443,10 @@ impl GpuContext {
     /// adapters such as lavapipe, where a level costs a dispatch's fixed 100-200 µs whatever
     /// its size; 0 on hardware adapters, where no figure says it pays (not measured yet).
     /// [`crate::BatchTimings::host_front`] is the time it takes.
+    ///
+    /// Set it before uploading: a mesh uploaded while the front is on keeps a copy of its tree
+    /// on the host (about `frcd_obb::ObbTree::memory_bytes`), one uploaded while it is off
+    /// keeps none, and its pairs start at their roots whatever the setting.
     pub fn set_host_front(&mut self, tests: u32) {
         self.host_front = tests;
     }

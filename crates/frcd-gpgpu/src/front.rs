@@ -99,29 +99,40 @@ pub(crate) fn host_front(pairs: &[BodyPair<'_>], budget: u32) -> HostFront {
     descend(pairs, budget)
 }
 
-/// [`host_front`] with a budget.
+/// [`host_front`] with a budget. A pair with a mesh uploaded without its CPU copy (the front
+/// was off then) starts at its roots.
 fn descend(pairs: &[BodyPair<'_>], budget: u32) -> HostFront {
-    let mut fronts: Vec<PairFront<'_>> = pairs
+    let mut fronts: Vec<Option<PairFront<'_>>> = pairs
         .iter()
-        .map(|&(a, pa, b, pb)| PairFront::new(&a.host.tree, pa, &b.host.tree, pb))
+        .map(|&(a, pa, b, pb)| match (&a.host, &b.host) {
+            (Some(ha), Some(hb)) => Some(PairFront::new(&ha.tree, pa, &hb.tree, pb)),
+            _ => None,
+        })
         .collect();
     let mut front = HostFront::default();
     loop {
-        let next: Vec<usize> = fronts.iter().map(PairFront::next_tests).collect();
+        let next: Vec<usize> = fronts
+            .iter()
+            .map(|f| f.as_ref().map_or(0, PairFront::next_tests))
+            .collect();
         let total: usize = next.iter().sum();
         if total == 0 || total > budget as usize {
             break;
         }
         for (f, &n) in fronts.iter_mut().zip(&next) {
-            if n > 0 {
+            if let (Some(f), true) = (f, n > 0) {
                 f.step();
             }
         }
         front.steps += 1;
     }
     for (k, (f, &(a, _, b, _))) in fronts.iter().zip(pairs).enumerate() {
+        let (Some(f), Some(ha), Some(hb)) = (f, &a.host, &b.host) else {
+            front.entries.push([k as u32, ONE_NODE, ONE_NODE, 0]);
+            front.levels = front.levels.max(a.depth.max(b.depth));
+            continue;
+        };
         front.tests += f.box_tests();
-        let (ha, hb): (&HostTree, &HostTree) = (&a.host, &b.host);
         for &(i, j) in f.pairs() {
             front
                 .entries

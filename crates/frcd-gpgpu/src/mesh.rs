@@ -324,8 +324,8 @@ pub struct GpuMesh {
     /// The largest deviation of the nodes' f32 axes from orthonormal (`pack::PackedTree::eps`).
     pub(crate) eps: f32,
     /// The tree and its packed order, for the CPU's descent of the top of each pair tree
-    /// (`front.rs`).
-    pub(crate) host: std::sync::Arc<crate::front::HostTree>,
+    /// (`front.rs`); kept only when the context's front was on at the upload.
+    pub(crate) host: Option<std::sync::Arc<crate::front::HostTree>>,
     bytes: u64,
 }
 
@@ -367,7 +367,8 @@ impl GpuContext {
     /// Uploads a tree (nodes and triangles, local frame, f32 rounded outward) once into the
     /// context's arena; queries then upload only poses. The arena grows (a GPU copy) when full.
     /// A tree with a leaf of more than [`MAX_LEAF_TRIANGLES`] triangles is
-    /// [`GpuError::MeshTooLarge`].
+    /// [`GpuError::MeshTooLarge`]. With the CPU front on ([`GpuContext::set_host_front`]) the
+    /// mesh also keeps a copy of the tree on the host, for the CPU's share of the traversal.
     pub fn upload(&self, tree: &ObbTree) -> Result<GpuMesh, GpuError> {
         // Node by node: `ObbTree::nodes` would build a whole f64 copy of the tree only for this.
         let max_leaf = (0..tree.node_count() as u32)
@@ -398,8 +399,12 @@ impl GpuContext {
             arena.tris.layout.items_per_row,
         )?;
         // Before the arena is touched: a refusal leaves it as it was.
-        let (bfs, first_child) = crate::pack::sibling_order(tree)?;
-        let host = crate::front::HostTree::new(tree, &bfs, &first_child);
+        let host = if self.host_front > 0 {
+            let (bfs, first_child) = crate::pack::sibling_order(tree)?;
+            Some(crate::front::HostTree::new(tree, &bfs, &first_child))
+        } else {
+            None
+        };
         let node_rows = node_layout.rows_per_layer as u64;
         let tri_rows = tri_layout.rows_per_layer as u64;
         let (node_row, g1) = arena.nodes.alloc(self, node_rows)?;

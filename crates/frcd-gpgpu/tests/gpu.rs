@@ -1469,4 +1469,20 @@ fn the_cpu_front_changes_no_answer_and_takes_levels_off_the_gpu() {
     assert_eq!(leaves.levels, 1);
     assert!(leaves.host_levels + 1 >= last);
     assert!(leaves.node_pairs_tested > 0);
+    // A mesh uploaded with the front off keeps no CPU copy of its tree: its pairs start at
+    // the roots, with the same answers, even with the front on.
+    ctx.set_host_front(0);
+    let bare = body(&ctx, shapes::torus(0.8, 0.25, 48, 16).expect("torus"));
+    ctx.set_host_front(u32::MAX);
+    let mixed: Vec<_> = poses
+        .iter()
+        .map(|(pa, pb)| (&a.gpu, pa, &bare.gpu, pb))
+        .collect();
+    let got = ctx
+        .collide_batch(&mixed, &mut QueryScratch::default())
+        .expect("batch");
+    for (k, (r, w)) in got.results.iter().zip(&want).enumerate() {
+        assert_eq!(&r.pairs, w, "pair {k} with a bare mesh");
+    }
+    assert_eq!((got.levels, got.host_levels), (depth, 0));
 }
