@@ -442,6 +442,27 @@ impl TriMesh {
         crate::topology::component_vertices(self.vertices.len(), &self.indices)
     }
 
+    /// Per connected component, in [`TriMesh::component_vertices`]' order, its vertices of
+    /// least and greatest coordinate on each axis: `[min x, max x, min y, max y, min z, max z]`
+    /// (vertex indices, the lowest on ties). Every point of a component's surface lies in the
+    /// box they span, and each face of that box holds one of them; so a component with one of
+    /// them outside a convex region is not inside it.
+    ///
+    /// ```
+    /// use frcd_geom::{shapes::{icosphere, merge}, DVec3, Pose};
+    /// let a = icosphere(1.0, 1);
+    /// let b = a.transformed(&Pose::from_translation(DVec3::X * 5.0));
+    /// let both = merge(&[a, b]).unwrap();
+    /// let ext = both.component_extremes();
+    /// assert_eq!(ext.len(), 2);
+    /// let v = both.vertices();
+    /// assert_eq!(v[ext[0][1] as usize].x, 1.0); // the first sphere's greatest x
+    /// assert_eq!(v[ext[1][0] as usize].x, 4.0); // the second's least x
+    /// ```
+    pub fn component_extremes(&self) -> Vec<[u32; 6]> {
+        crate::topology::component_extremes(&self.vertices, &self.indices).1
+    }
+
     /// Signed volume by the divergence theorem (positive for a closed mesh with outward normals).
     pub fn signed_volume(&self) -> f64 {
         // Relative to the box centre to limit cancellation for large offsets.

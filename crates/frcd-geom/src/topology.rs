@@ -259,6 +259,23 @@ fn edge_ends(key: u64) -> (u32, u32) {
 /// The lowest-index vertex of each connected component of the used vertices (linked through
 /// shared triangles, union-find), in index order: one entry per component.
 pub(crate) fn component_vertices(vertex_count: usize, indices: &[[u32; 3]]) -> Vec<u32> {
+    components(vertex_count, indices, None).0
+}
+
+/// [`component_vertices`], and per component (in the same order) its vertices of least and
+/// greatest x, y and z: `[min x, max x, min y, max y, min z, max z]` (the lowest index on ties).
+pub(crate) fn component_extremes(
+    vertices: &[crate::DVec3],
+    indices: &[[u32; 3]],
+) -> (Vec<u32>, Vec<[u32; 6]>) {
+    components(vertices.len(), indices, Some(vertices))
+}
+
+fn components(
+    vertex_count: usize,
+    indices: &[[u32; 3]],
+    extremes_of: Option<&[crate::DVec3]>,
+) -> (Vec<u32>, Vec<[u32; 6]>) {
     let mut parent: Vec<u32> = (0..vertex_count as u32).collect();
     fn root(p: &mut [u32], mut i: u32) -> u32 {
         while p[i as usize] != i {
@@ -280,16 +297,34 @@ pub(crate) fn component_vertices(vertex_count: usize, indices: &[[u32; 3]]) -> V
             }
         }
     }
-    let mut seen = vec![false; vertex_count];
+    // Each root's component number, in the order of the components' lowest vertices.
+    let mut number = vec![u32::MAX; vertex_count];
     let mut out = Vec::new();
+    let mut extremes: Vec<[u32; 6]> = Vec::new();
     for v in (0..vertex_count as u32).filter(|&v| used[v as usize]) {
         let r = root(&mut parent, v) as usize;
-        if !seen[r] {
-            seen[r] = true;
+        if number[r] == u32::MAX {
+            number[r] = out.len() as u32;
             out.push(v);
+            if extremes_of.is_some() {
+                extremes.push([v; 6]);
+            }
+        }
+        if let Some(p) = extremes_of {
+            let e = &mut extremes[number[r] as usize];
+            let at = p[v as usize].to_array();
+            for axis in 0..3 {
+                // Strict comparisons: the lowest index wins a tie (vertices come in order).
+                if at[axis] < p[e[2 * axis] as usize][axis] {
+                    e[2 * axis] = v;
+                }
+                if at[axis] > p[e[2 * axis + 1] as usize][axis] {
+                    e[2 * axis + 1] = v;
+                }
+            }
         }
     }
-    out
+    (out, extremes)
 }
 
 #[cfg(test)]

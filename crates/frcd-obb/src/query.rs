@@ -225,8 +225,14 @@ pub(crate) fn contained(
     frame: &RelativeFrame,
     seed: u64,
 ) -> Option<Containment> {
+    // The surfaces do not touch, so each component of one mesh lies wholly inside the other's
+    // solid or wholly outside: one of its extreme vertices outside a box holding the other mesh
+    // (the box the parity test itself starts with) settles it without a ray.
     if a.closed {
-        for &p in &b.component_points {
+        for (&p, ext) in b.component_points.iter().zip(&b.component_extremes) {
+            if ext.iter().any(|&v| !a.aabb.contains_point(frame.point(v))) {
+                continue;
+            }
             let p = frame.point(p);
             if point_inside_tree(p, a, None, seed) == Some(true) {
                 return Some(Containment::BInsideA);
@@ -235,7 +241,13 @@ pub(crate) fn contained(
     }
     if b.closed {
         let slack = query_slack(a, b, frame);
-        for &p in &a.component_points {
+        // B's box in A's frame, as the parity test bounds it (none where it overflows).
+        let bounds = frame.aabb(&b.aabb, slack);
+        let finite = bounds.min.is_finite() && bounds.max.is_finite();
+        for (&p, ext) in a.component_points.iter().zip(&a.component_extremes) {
+            if finite && ext.iter().any(|&v| !bounds.contains_point(v)) {
+                continue;
+            }
             if point_inside_tree(p, b, Some((frame, slack)), seed) == Some(true) {
                 return Some(Containment::AInsideB);
             }

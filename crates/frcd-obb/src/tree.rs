@@ -136,6 +136,10 @@ pub struct ObbTree {
     pub(crate) vertex_radius: f64,
     /// One vertex per connected component (for the point-in-mesh parity tests).
     pub(crate) component_points: Vec<DVec3>,
+    /// Per connected component (same order), its vertices of least and greatest x, y and z
+    /// (`TriMesh::component_extremes`): one of them outside a convex region (a box holding
+    /// the other mesh) puts the component outside that mesh, with no parity test.
+    pub(crate) component_extremes: Vec<[DVec3; 6]>,
     /// Identity of this build (clones share it: same structure), for caches.
     pub(crate) uid: u64,
     /// Every edge has an even number of incident triangles (parity tests are meaningful).
@@ -214,6 +218,7 @@ impl ObbTree {
             radius_from_origin,
             vertex_radius,
             component_points: component_points(&mesh),
+            component_extremes: component_extremes(&mesh),
             closed: mesh.topology().is_closed(),
             uid: NEXT_UID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
             mesh,
@@ -391,6 +396,7 @@ impl ObbTree {
             + self.order.capacity() * std::mem::size_of::<u32>()
             + self.ends.capacity() * std::mem::size_of::<u64>()
             + self.component_points.capacity() * std::mem::size_of::<DVec3>()
+            + self.component_extremes.capacity() * std::mem::size_of::<[DVec3; 6]>()
     }
 
     /// Depth of the tree (a single leaf has depth 1).
@@ -420,6 +426,15 @@ fn norm_bound(p: DVec3) -> f64 {
     } else {
         m * (1.732_050_807_568_877_3 * (1.0 + 1e-15))
     }
+}
+
+/// Per connected component of `mesh`, its extreme vertices on each axis.
+fn component_extremes(mesh: &TriMesh) -> Vec<[DVec3; 6]> {
+    let vertices = mesh.vertices();
+    mesh.component_extremes()
+        .iter()
+        .map(|e| e.map(|v| vertices[v as usize]))
+        .collect()
 }
 
 /// One vertex of each connected component of `mesh` (its lowest-index one).
@@ -461,7 +476,8 @@ mod tests {
                 + capacity * std::mem::size_of::<TNode>()
                 + tree.order.len() * 4
                 + tree.ends.capacity() * 8
-                + tree.component_points.capacity() * std::mem::size_of::<DVec3>();
+                + tree.component_points.capacity() * std::mem::size_of::<DVec3>()
+                + tree.component_extremes.capacity() * std::mem::size_of::<[DVec3; 6]>();
             assert_eq!(bytes, exact, "leaf {leaf}");
         }
     }

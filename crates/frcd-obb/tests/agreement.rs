@@ -396,6 +396,52 @@ fn solid_mode_reports_containment_both_ways() {
     );
 }
 
+/// Containment of meshes with several components, some inside the other mesh's box and some
+/// reaching out of it (their extreme vertices settle those without a ray), against the oracle
+/// both ways, at random poses where no surface pair touches.
+#[test]
+fn containment_of_many_components_equals_the_oracle() {
+    let big = shapes::torus(2.0, 0.9, 40, 20).expect("torus");
+    let tbig = ObbTree::build(&big, &BuildOptions::default());
+    let mut rng = StdRng::seed_from_u64(0x5eed_c0de);
+    let (mut inside, mut outside, mut checked) = (0, 0, 0);
+    for _ in 0..300 {
+        // Three small spheres, one of them often wholly inside the torus's tube.
+        let parts: Vec<TriMesh> = (0..3)
+            .map(|_| {
+                let at = DVec3::new(
+                    rng.random_range(-3.2..3.2),
+                    rng.random_range(-3.2..3.2),
+                    rng.random_range(-1.2..1.2),
+                );
+                let r = rng.random_range(0.05..0.4);
+                shapes::icosphere(r, 1).transformed(&Pose::from_translation(at))
+            })
+            .collect();
+        let small = shapes::merge(&parts).expect("merge");
+        let tsmall = ObbTree::build(&small, &BuildOptions::default());
+        assert_eq!(small.component_extremes().len(), 3);
+        let p = random_pose(&mut rng, 0.3);
+        if !oracle::pairs(&big, &Pose::IDENTITY, &small, &p).is_empty() {
+            continue;
+        }
+        checked += 1;
+        let want = oracle::containment(&big, &Pose::IDENTITY, &small, &p);
+        let got = frcd_obb::containment(&tbig, &Pose::IDENTITY, &tsmall, &p);
+        assert_eq!(got, want);
+        let back = frcd_obb::containment(&tsmall, &p, &tbig, &Pose::IDENTITY);
+        assert_eq!(back, oracle::containment(&small, &p, &big, &Pose::IDENTITY));
+        match want {
+            Some(_) => inside += 1,
+            None => outside += 1,
+        }
+    }
+    assert!(
+        checked > 100 && inside > 10 && outside > 10,
+        "{checked} {inside} {outside}"
+    );
+}
+
 #[test]
 fn segments_lie_on_both_triangles() {
     let a = shapes::icosphere(1.0, 2);
