@@ -126,7 +126,7 @@ pub struct Opts {
     #[arg(long, value_name = "on|off", value_parser = parse_on_off)]
     pub exact_offsets: Option<bool>,
     /// Box tests per level the CPU may take off the GPU at the top of each batch's pair trees
-    /// (`GpuContext::set_host_front`; 0: none); left out, the context's default (4,096 on a
+    /// (`GpuContext::set_host_front`; 0: none); left out, the context's default (2,048 on a
     /// software adapter, 0 on a hardware one).
     #[arg(long = "host-front", value_name = "TESTS")]
     pub host_front: Option<u32>,
@@ -723,29 +723,30 @@ pub fn run(mut o: Opts) -> Result<()> {
         });
     }
 
+    // Variants of the GPGPU options the checker section times against the default, in one
+    // process.
+    let (gpu, _) = checker_options();
+    let mut changes: Vec<(String, frcd_hybrid::Options)> = Vec::new();
+    for &l in &o.checker_gpu_leaves {
+        let options = frcd_hybrid::Options {
+            gpu_build: Some(frcd_obb::BuildOptions {
+                max_leaf_triangles: l,
+                ..gpu.build
+            }),
+            ..gpu.clone()
+        };
+        changes.push((format!("GPU leaves of {l}"), options));
+    }
+    for &t in &o.checker_host_front {
+        let options = frcd_hybrid::Options {
+            gpu_host_front: Some(t),
+            ..gpu.clone()
+        };
+        changes.push((format!("a CPU front of {t} box tests per level"), options));
+    }
     let mut checker_rows: Vec<CheckerRow> = Vec::new();
     for &n in &o.checker {
         checker_rows.push(checker_row(n, o.runs, warm)?);
-        // Variants of the GPGPU options, timed against the default in one process.
-        let (gpu, _) = checker_options();
-        let mut changes: Vec<(String, frcd_hybrid::Options)> = Vec::new();
-        for &l in &o.checker_gpu_leaves {
-            let o = frcd_hybrid::Options {
-                gpu_build: Some(frcd_obb::BuildOptions {
-                    max_leaf_triangles: l,
-                    ..gpu.build
-                }),
-                ..gpu.clone()
-            };
-            changes.push((format!("GPU leaves of {l}"), o));
-        }
-        for &t in &o.checker_host_front {
-            let o = frcd_hybrid::Options {
-                gpu_host_front: Some(t),
-                ..gpu.clone()
-            };
-            changes.push((format!("a CPU front of {t} box tests per level"), o));
-        }
         if !changes.is_empty() {
             checker_variants(n, o.runs, warm, &changes)?;
         }

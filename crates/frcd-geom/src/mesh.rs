@@ -442,11 +442,12 @@ impl TriMesh {
         crate::topology::component_vertices(self.vertices.len(), &self.indices)
     }
 
-    /// Per connected component, in [`TriMesh::component_vertices`]' order, its vertices of
-    /// least and greatest coordinate on each axis: `[min x, max x, min y, max y, min z, max z]`
-    /// (vertex indices, the lowest on ties). Every point of a component's surface lies in the
-    /// box they span, and each face of that box holds one of them; so a component with one of
-    /// them outside a convex region is not inside it.
+    /// Per connected component, in [`TriMesh::component_vertices`]' order: its lowest-index
+    /// vertex (that method's entry) and its vertices of least and greatest coordinate on each
+    /// axis, `[min x, max x, min y, max y, min z, max z]` (vertex indices, the lowest on ties).
+    /// Every point of a component's surface lies in the box the extremes span, and each face of
+    /// that box holds one of them; so a component with one of them outside a convex region is
+    /// not inside it. One pass over the mesh gives both.
     ///
     /// ```
     /// use frcd_geom::{shapes::{icosphere, merge}, DVec3, Pose};
@@ -455,12 +456,14 @@ impl TriMesh {
     /// let both = merge(&[a, b]).unwrap();
     /// let ext = both.component_extremes();
     /// assert_eq!(ext.len(), 2);
+    /// assert_eq!(ext.iter().map(|e| e.0).collect::<Vec<_>>(), both.component_vertices());
     /// let v = both.vertices();
-    /// assert_eq!(v[ext[0][1] as usize].x, 1.0); // the first sphere's greatest x
-    /// assert_eq!(v[ext[1][0] as usize].x, 4.0); // the second's least x
+    /// assert_eq!(v[ext[0].1[1] as usize].x, 1.0); // the first sphere's greatest x
+    /// assert_eq!(v[ext[1].1[0] as usize].x, 4.0); // the second's least x
     /// ```
-    pub fn component_extremes(&self) -> Vec<[u32; 6]> {
-        crate::topology::component_extremes(&self.vertices, &self.indices).1
+    pub fn component_extremes(&self) -> Vec<(u32, [u32; 6])> {
+        let (lowest, extremes) = crate::topology::component_extremes(&self.vertices, &self.indices);
+        lowest.into_iter().zip(extremes).collect()
     }
 
     /// Signed volume by the divergence theorem (positive for a closed mesh with outward normals).

@@ -92,14 +92,14 @@ pub enum Recheck {
 /// new contexts: `1` on, `0` off (for measurements through programs that do not call it).
 pub const EXACT_OFFSETS_ENV: &str = "FRCD_GPGPU_EXACT_OFFSETS";
 
-/// The exact path's default for a new context: on for hardware adapters (on an H200 it cut the
-/// uncertain pairs 70-200× at no measurable cost to the triangle pass), off for software ones
-/// (on lavapipe its integer work made the triangle pass about twice as long, more than the CPU
-/// re-decision it saves there; see docs/performance/gpu.md), unless [`EXACT_OFFSETS_ENV`] says.
 /// [`GpuContext::set_host_front`]'s default on software adapters: box tests per level the CPU
 /// takes off the GPU at the top of a batch's pair trees.
 pub const HOST_FRONT_SOFTWARE: u32 = 2048;
 
+/// The exact path's default for a new context: on for hardware adapters (on an H200 it cut the
+/// uncertain pairs 70-200× at no measurable cost to the triangle pass), off for software ones
+/// (on lavapipe its integer work made the triangle pass about twice as long, more than the CPU
+/// re-decision it saves there; see docs/performance/gpu.md), unless [`EXACT_OFFSETS_ENV`] says.
 fn exact_offsets_default(info: &wgpu::AdapterInfo) -> bool {
     match std::env::var(EXACT_OFFSETS_ENV).as_deref() {
         Ok("1") => true,

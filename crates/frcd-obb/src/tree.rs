@@ -204,6 +204,7 @@ impl ObbTree {
         }
         let points = mesh.vertices();
         let sphere = Sphere::from_points(points);
+        let (component_points, component_extremes) = components(&mesh);
         let aabb = mesh.aabb();
         let radius_from_origin = aabb.min.abs().max(aabb.max.abs()).length();
         let vertex_radius = points.iter().fold(0.0f64, |r, p| r.max(norm_bound(*p)));
@@ -217,8 +218,8 @@ impl ObbTree {
             aabb,
             radius_from_origin,
             vertex_radius,
-            component_points: component_points(&mesh),
-            component_extremes: component_extremes(&mesh),
+            component_points,
+            component_extremes,
             closed: mesh.topology().is_closed(),
             uid: NEXT_UID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
             mesh,
@@ -428,22 +429,14 @@ fn norm_bound(p: DVec3) -> f64 {
     }
 }
 
-/// Per connected component of `mesh`, its extreme vertices on each axis.
-fn component_extremes(mesh: &TriMesh) -> Vec<[DVec3; 6]> {
+/// Per connected component of `mesh`: one vertex (its lowest-index one), and its extreme
+/// vertices on each axis.
+fn components(mesh: &TriMesh) -> (Vec<DVec3>, Vec<[DVec3; 6]>) {
     let vertices = mesh.vertices();
     mesh.component_extremes()
         .iter()
-        .map(|e| e.map(|v| vertices[v as usize]))
-        .collect()
-}
-
-/// One vertex of each connected component of `mesh` (its lowest-index one).
-fn component_points(mesh: &TriMesh) -> Vec<DVec3> {
-    let vertices = mesh.vertices();
-    mesh.component_vertices()
-        .iter()
-        .map(|&v| vertices[v as usize])
-        .collect()
+        .map(|(v, e)| (vertices[*v as usize], e.map(|x| vertices[x as usize])))
+        .unzip()
 }
 
 #[cfg(test)]
