@@ -115,6 +115,11 @@ pub struct Opts {
         value_delimiter = ','
     )]
     pub checker_host_front: Vec<u32>,
+    /// Checker section: also time GPGPU `check` re-deciding only the pairs the GPU left
+    /// uncertain (`frcd_hybrid::Options::gpu_recheck_certified` false), alternated run by run
+    /// with the default's in one process (answers checked equal).
+    #[arg(long = "checker-recheck-uncertain")]
+    pub checker_recheck_uncertain: bool,
     /// Time every GPU pass of the batches with GPU timestamps (where the adapter has
     /// timestamps inside passes) for the breakdown table; the host's split (waiting for the
     /// GPU, the CPU's re-decision) is always written.
@@ -743,6 +748,13 @@ pub fn run(mut o: Opts) -> Result<()> {
             ..gpu.clone()
         };
         changes.push((format!("a CPU front of {t} box tests per level"), options));
+    }
+    if o.checker_recheck_uncertain {
+        let options = frcd_hybrid::Options {
+            gpu_recheck_certified: false,
+            ..gpu.clone()
+        };
+        changes.push(("only the uncertain pairs re-decided".into(), options));
     }
     let mut checker_rows: Vec<CheckerRow> = Vec::new();
     for &n in &o.checker {

@@ -49,11 +49,14 @@ const WG: u32 = 64u;
 //   NaN or infinity is ever produced and no comparison relies on their semantics.
 // - Every bound is evaluated in f32 itself, from non-negative terms only (at most ~10
 //   roundings, relative error < 12 U), and multiplied by 1.01, which covers that.
-// - GPU "touching" answers are not trusted at all: the CPU re-decides every pair the GPU
-//   reports with the exact test (cheap next to the readback), so these bounds only have to
-//   make "disjoint" / "separated" decisions safe: rounding can then only add candidates.
+// - Every sign a decision uses is taken only when it exceeds its bound, so both verdicts are
+//   certified: "disjoint" / "separated" (rounding can only add candidates) and "touching"
+//   (`check_min_max` answers TRI_TOUCH only from certain signs). By default (`Recheck::All`)
+//   the CPU still re-decides every pair the GPU reports with the exact test, so a driver that
+//   breaks these rules cannot add a pair; `Recheck::Uncertain` takes the touching verdicts.
 // `emulate.rs` (a test module of the crate) runs this arithmetic on the CPU with every
-// rounding direction, with and without FMA and FTZ, and checks that no touching pair is lost.
+// rounding direction, with and without FMA and FTZ, and checks both directions: no touching
+// pair is declared disjoint and no disjoint pair touching.
 const U: f32 = 1.1920929e-7;
 const TAU: f32 = 1.1754944e-38;
 const UNCERTAIN_FLAG: u32 = 0x80000000u;

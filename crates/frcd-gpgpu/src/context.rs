@@ -84,7 +84,9 @@ pub enum Recheck {
     All,
     /// Only the pairs the GPU flagged uncertain; its *touching* pairs are taken as certified by
     /// the bounds (`gpu_refuted` stays 0). Faster where many pairs touch; trusts the driver's
-    /// conformance.
+    /// conformance, as its *disjoint* verdicts always do: `emulate.rs` checks under every
+    /// rounding mode, with and without FMA and flush-to-zero, that no disjoint pair is declared
+    /// touching (`no_disjoint_triangle_pair_is_declared_touching_under_any_rounding`).
     Uncertain,
 }
 

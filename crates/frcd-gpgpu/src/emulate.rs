@@ -735,6 +735,62 @@ mod tests {
         out
     }
 
+    /// Pairs `(a, b_local, frame)` that are disjoint for the exact f64 test, many of them only
+    /// just: B starts a gap (1e-10 to 0.2 of the scale) off a point of A (vertex, edge point or
+    /// interior point) and lies wholly on the far side of A's plane, or (coplanar) of one of
+    /// A's edge lines, at the scales and offsets of `touching_cases`.
+    fn disjoint_cases() -> Vec<(Triangle, Triangle, RelativeFrame)> {
+        let rnd = signed_uniform(67890u64);
+        let mut out = Vec::new();
+        let scales = [1e-30, 1e-12, 1e-3, 1.0, 1e4];
+        let offsets = [0.0, 1.0, 1e3, 1e7];
+        let gaps = [1e-10, 1e-8, 1e-6, 1e-4, 1e-2, 0.2];
+        let mut k = 0;
+        while out.len() < 3000 && k < 200_000 {
+            k += 1;
+            let s = scales[k % scales.len()];
+            let off = offsets[(k / 5) % offsets.len()];
+            let gap = s * gaps[(k / 20) % gaps.len()];
+            let o = DVec3::new(off, -0.5 * off, 0.25 * off);
+            let rv = || DVec3::new(rnd(), rnd(), rnd());
+            let a = Triangle::new(o + s * rv(), o + s * rv(), o + s * rv());
+            let nrm = (a.v[1] - a.v[0]).cross(a.v[2] - a.v[0]).normalize_or_zero();
+            let b_world = if k % 4 == 0 {
+                // Coplanar, beyond the edge v0 v1: from a point of the edge, outward in A's
+                // plane, every vertex of B at least `gap` past the edge's line.
+                let e = (a.v[1] - a.v[0]).normalize_or_zero();
+                let out_dir = nrm.cross(e);
+                let out_dir = if out_dir.dot(a.v[2] - a.v[0]) > 0.0 {
+                    -out_dir
+                } else {
+                    out_dir
+                };
+                let p = a.v[0] + 0.5 * (rnd() + 1.0) * (a.v[1] - a.v[0]) + gap * out_dir;
+                let far = |x: f64| p + s * (rnd() * e + (x * 0.5 * (rnd() + 1.0)) * out_dir);
+                Triangle::new(p, far(1.0), far(1.0))
+            } else {
+                let (u, v) = match k % 3 {
+                    0 => (0.0, 0.0),
+                    1 => (0.5 * (rnd() + 1.0), 0.0),
+                    _ => (0.25 * (rnd() + 1.0), 0.25 * (rnd() + 1.0)),
+                };
+                let p = a.v[0] + u * (a.v[1] - a.v[0]) + v * (a.v[2] - a.v[0]) + gap * nrm;
+                // The other vertices above A's plane too (a tangent part and a normal part).
+                let up = |x: DVec3| p + s * (x - x.dot(nrm) * nrm + 0.5 * (rnd() + 1.0) * nrm);
+                Triangle::new(p, up(rv()), up(rv()))
+            };
+            let q = DQuat::from_axis_angle(rv().normalize_or(DVec3::Z), 3.0 * rnd());
+            let pose_b = Pose::new(o + s * rv(), q);
+            let frame = RelativeFrame::new(&Pose::IDENTITY, &pose_b);
+            let inv = |x: DVec3| frame.m.transpose() * (x - frame.t);
+            let b_local = Triangle::new(inv(b_world.v[0]), inv(b_world.v[1]), inv(b_world.v[2]));
+            if !frcd_tritri::intersects(Method::Exact, &a, &frame.triangle(&b_local)) {
+                out.push((a, b_local, frame));
+            }
+        }
+        out
+    }
+
     /// A triangle of a one-triangle "mesh" as the packing stores it (grid from its own vertices).
     fn tri_off(t: &Triangle) -> (TriOff, Option<i32>) {
         let mag =
@@ -770,8 +826,12 @@ mod tests {
 
     /// `touching_cases` as the triangle pass sees them: (absolute f32 triangles for main's
     /// arithmetic, packed triangles, grids, exact pose if the ranges hold, f32 pose).
-    #[allow(clippy::type_complexity)]
-    fn packed_cases() -> Vec<(
+    fn packed_cases() -> Vec<PackedCase> {
+        pack_cases(&touching_cases())
+    }
+
+    /// A case as the triangle pass sees it (see `packed_cases`).
+    type PackedCase = (
         [V3; 3],
         [V3; 3],
         TriOff,
@@ -779,8 +839,10 @@ mod tests {
         (Option<i32>, Option<i32>),
         Option<ExactPose>,
         PoseF,
-    )> {
-        touching_cases()
+    );
+
+    fn pack_cases(cases: &[(Triangle, Triangle, RelativeFrame)]) -> Vec<PackedCase> {
+        cases
             .iter()
             .map(|(a, b, frame)| {
                 let (ta, ea) = tri_off(a);
@@ -811,6 +873,63 @@ mod tests {
             }
         }
         set_env(envs(1.0)[0]);
+    }
+
+    /// The other direction, which `Recheck::Uncertain` relies on: a pair the GPU reports as
+    /// touching (not uncertain) touches, under every rounding mode, with and without FMA and
+    /// flush-to-zero, on every path.
+    #[test]
+    fn no_disjoint_triangle_pair_is_declared_touching_under_any_rounding() {
+        let cases = pack_cases(&disjoint_cases());
+        assert!(cases.len() >= 1000, "{}", cases.len());
+        let exact = cases.iter().filter(|c| c.5.is_some()).count();
+        assert!(exact * 5 >= cases.len() * 3, "{exact} of {}", cases.len());
+        // Under every environment, how many cases each path decided disjoint (the others
+        // are uncertain): the gaps span both outcomes.
+        let mut decided = [usize::MAX; 3];
+        for env in envs(1.0) {
+            set_env(env);
+            let mut d = [0; 3];
+            for (i, (a, b, ta, tb, grids, ep, pose)) in cases.iter().enumerate() {
+                let r = tri_tri_absolute(pose, *a, *b);
+                assert_ne!(r, TRI_TOUCH, "{env:?}: case {i} added (absolute)");
+                d[0] += (r == TRI_DISJOINT) as usize;
+                let r = pass(pose, ep.as_ref(), *grids, ta, tb);
+                assert_ne!(r, TRI_TOUCH, "{env:?}: case {i} added ({ep:?})");
+                d[1] += (r == TRI_DISJOINT) as usize;
+                let r = tri_tri_rotated(pose, grids.0.unwrap_or(0), grids.1.unwrap_or(0), ta, tb);
+                assert_ne!(r, TRI_TOUCH, "{env:?}: case {i} added (rotated)");
+                d[2] += (r == TRI_DISJOINT) as usize;
+            }
+            decided = std::array::from_fn(|k| decided[k].min(d[k]));
+        }
+        set_env(envs(1.0)[0]);
+        assert!(
+            decided.iter().all(|&n| n > 100 && n < cases.len() - 100),
+            "{decided:?} of {}",
+            cases.len()
+        );
+    }
+
+    #[test]
+    fn without_the_bounds_some_rounding_declares_a_disjoint_pair_touching() {
+        // The test above can fail: with the error bounds zeroed, some rounding declares some
+        // disjoint pair touching, on each path.
+        let cases = pack_cases(&disjoint_cases());
+        let mut added = [0; 3];
+        for env in envs(0.0) {
+            set_env(env);
+            for (a, b, ta, tb, grids, ep, pose) in &cases {
+                let (ga, gb) = (grids.0.unwrap_or(0), grids.1.unwrap_or(0));
+                added[0] += (tri_tri_absolute(pose, *a, *b) == TRI_TOUCH) as usize;
+                added[1] += (tri_tri_rotated(pose, ga, gb, ta, tb) == TRI_TOUCH) as usize;
+                if let Some(ep) = ep {
+                    added[2] += (tri_tri_exact(pose, ep, ta, tb) == TRI_TOUCH) as usize;
+                }
+            }
+        }
+        set_env(envs(1.0)[0]);
+        assert!(added.iter().all(|&n| n > 0), "{added:?}");
     }
 
     #[test]

@@ -60,6 +60,41 @@ impl Checker {
         exclude: &[(usize, usize)],
         options: Options,
     ) -> Result<Self, HybridError> {
+        Self::build(bodies, exclude, options, None)
+    }
+
+    /// [`Checker::new`] whose GPU stages run on the caller's device and queue (an engine's
+    /// own) instead of a headless device of the checker's own: frcd-gpgpu's
+    /// `GpuContext::from_device` and frcd-image's `ImageContext::from_device` on clones of
+    /// `device`'s handles. The same rules choose whether a GPU stage runs at all (the backend,
+    /// the cost model, [`Options::gpu`]); a device that lacks what a wanted stage needs is
+    /// refused as a headless one would be (an error under [`crate::GpuPolicy::Require`] or a
+    /// GPGPU / image backend, otherwise a note and the CPU).
+    ///
+    /// ```no_run
+    /// # fn engine_device() -> (wgpu::Device, wgpu::Queue) { unimplemented!() }
+    /// use frcd_hybrid::{Backend, Checker, GpuDevice, Options};
+    /// let (device, queue) = engine_device();
+    /// let options = Options { backend: Backend::Gpgpu, ..Options::default() };
+    /// let checker = Checker::with_device(vec![], &[], options, GpuDevice { device, queue })?;
+    /// # Ok::<(), frcd_hybrid::HybridError>(())
+    /// ```
+    #[cfg(any(feature = "gpgpu", feature = "image"))]
+    pub fn with_device(
+        bodies: Vec<BodySpec>,
+        exclude: &[(usize, usize)],
+        options: Options,
+        device: crate::GpuDevice,
+    ) -> Result<Self, HybridError> {
+        Self::build(bodies, exclude, options, Some(device))
+    }
+
+    fn build(
+        bodies: Vec<BodySpec>,
+        exclude: &[(usize, usize)],
+        options: Options,
+        device: Option<crate::gpu::CallerDevice>,
+    ) -> Result<Self, HybridError> {
         let count = bodies.len();
         let mut excluded = HashSet::new();
         for &(a, b) in exclude {
@@ -153,7 +188,7 @@ impl Checker {
             #[cfg(feature = "image")]
             image: None,
         };
-        checker.init_gpu()?;
+        checker.init_gpu(device)?;
         Ok(checker)
     }
 

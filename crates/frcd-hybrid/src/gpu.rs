@@ -11,6 +11,26 @@ use crate::{FrameState, report::Via};
 #[allow(unused_imports)]
 use frcd_geom::Pose;
 
+/// A caller's wgpu device and queue for the GPU stages of a checker
+/// ([`Checker::with_device`]): an engine's own device, so that the checker's work shares its
+/// queue and memory instead of opening a second device (features `gpgpu`, `image`).
+#[cfg(any(feature = "gpgpu", feature = "image"))]
+#[derive(Clone, Debug)]
+pub struct GpuDevice {
+    /// The device the checker's buffers, textures and pipelines are created on.
+    pub device: wgpu::Device,
+    /// The queue its submissions go to.
+    pub queue: wgpu::Queue,
+}
+
+/// The device [`Checker::init_gpu`] is given: the caller's, or none (then headless devices of
+/// the checker's own).
+#[cfg(any(feature = "gpgpu", feature = "image"))]
+pub(crate) type CallerDevice = GpuDevice;
+/// Without GPU features no device can be given.
+#[cfg(not(any(feature = "gpgpu", feature = "image")))]
+pub(crate) type CallerDevice = std::convert::Infallible;
+
 #[cfg(feature = "gpgpu")]
 #[derive(Debug)]
 pub(crate) struct Gpgpu {
@@ -56,7 +76,9 @@ impl Checker {
             && self.options.cost.adapter != adapter
     }
 
-    pub(crate) fn init_gpu(&mut self) -> Result<(), HybridError> {
+    pub(crate) fn init_gpu(&mut self, device: Option<CallerDevice>) -> Result<(), HybridError> {
+        #[cfg(not(any(feature = "gpgpu", feature = "image")))]
+        let _ = device;
         let o = self.options.clone();
         if o.gpu == GpuPolicy::Off {
             if matches!(o.backend, Backend::Gpgpu | Backend::Image) {
@@ -94,7 +116,7 @@ impl Checker {
         let _ = hard; // used only with the GPU features
         if want_gpgpu {
             #[cfg(feature = "gpgpu")]
-            match self.make_gpgpu() {
+            match self.make_gpgpu(device.as_ref()) {
                 Ok(g) => {
                     let name = g.ctx.adapter_info().name.clone();
                     if self.skip_software(g.ctx.is_software(), &name) {
@@ -124,7 +146,7 @@ impl Checker {
         }
         if want_image {
             #[cfg(feature = "image")]
-            match self.make_image() {
+            match self.make_image(device.as_ref()) {
                 Ok(g) => {
                     let ctx = g.det.context();
                     let name = ctx.adapter_info().map_or(String::new(), |i| i.name.clone());
@@ -159,11 +181,17 @@ impl Checker {
     }
 
     #[cfg(feature = "gpgpu")]
-    fn make_gpgpu(&self) -> Result<Gpgpu, GpuFailure> {
+    fn make_gpgpu(&self, device: Option<&GpuDevice>) -> Result<Gpgpu, GpuFailure> {
         use rayon::prelude::*;
-        let mut ctx = frcd_gpgpu::GpuContext::headless()?;
+        let mut ctx = match device {
+            Some(d) => frcd_gpgpu::GpuContext::from_device(d.device.clone(), d.queue.clone())?,
+            None => frcd_gpgpu::GpuContext::headless()?,
+        };
         if let Some(tests) = self.options.gpu_host_front {
             ctx.set_host_front(tests);
+        }
+        if !self.options.gpu_recheck_certified {
+            ctx.set_recheck(frcd_gpgpu::Recheck::Uncertain);
         }
         let meshes = match self.options.gpu_build {
             // Trees of their own for the GPU, dropped once packed (the upload keeps the mesh).
@@ -185,8 +213,14 @@ impl Checker {
     }
 
     #[cfg(feature = "image")]
-    fn make_image(&mut self) -> Result<Image, GpuFailure> {
-        let det = frcd_image::ImageDetector::headless()?;
+    fn make_image(&mut self, device: Option<&GpuDevice>) -> Result<Image, GpuFailure> {
+        let det = match device {
+            Some(d) => frcd_image::ImageDetector::new(frcd_image::ImageContext::from_device(
+                d.device.clone(),
+                d.queue.clone(),
+            )?)?,
+            None => frcd_image::ImageDetector::headless()?,
+        };
         let mut meshes = Vec::with_capacity(self.meshes.len());
         for (i, m) in self.meshes.iter().enumerate() {
             let name = self

@@ -118,6 +118,8 @@ pub use cost::{CostModel, CostModelError};
 pub use error::{GpuFailure, HybridError};
 pub use frcd_obb::Containment;
 pub use frcd_tritri::Contact;
+#[cfg(any(feature = "gpgpu", feature = "image"))]
+pub use gpu::GpuDevice;
 pub use options::{Accuracy, Backend, BodySpec, GpuPolicy, Options};
 pub use pipeline::Pipeline;
 pub use report::{FrameResult, PairClearance, PairContact, Stage, StageBackend, StageReport, Via};

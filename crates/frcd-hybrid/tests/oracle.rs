@@ -340,6 +340,16 @@ fn exact_gpgpu_and_gpu_heavy_hybrid_equal_oracle() {
         .expect("gpgpu backend");
         assert_eq!(want, got, "CPU front of {front} box tests per level");
     }
+    // Only the pairs the GPU left uncertain re-decided on the CPU: the same answers.
+    let (want, got, _) = run(
+        &s,
+        Options {
+            gpu_recheck_certified: false,
+            ..forced.clone()
+        },
+    )
+    .expect("gpgpu backend");
+    assert_eq!(want, got, "touching verdicts taken from the GPU");
     // A cost model in which the GPU is free: hybrid puts broad and narrow phase on it.
     let cheap_gpu = CostModel {
         gpu_broad_us: Some(0.0),
@@ -366,6 +376,103 @@ fn exact_gpgpu_and_gpu_heavy_hybrid_equal_oracle() {
             .collect();
         assert_eq!(got, truth(&s, poses));
     }
+}
+
+/// A checker on the caller's device (an engine's own, `Checker::with_device`): its GPU stages
+/// run there, on the GPGPU backend (exact) and the image backend (fast), with the answers of
+/// the oracle; a device too small for the GPGPU stage is refused where a headless checker of
+/// the same options runs, so the stage really is on the device given.
+#[cfg(feature = "gpgpu")]
+#[test]
+fn a_checker_on_the_callers_device_runs_there() {
+    use frcd_hybrid::GpuDevice;
+    let s = scene(11, 12, 3, true);
+    let adapter = match frcd_gpu::request_adapter(&frcd_gpu::AdapterOptions::default()) {
+        Ok(a) => a,
+        Err(e) if !gpu_required() => {
+            println!("SKIP a_checker_on_the_callers_device_runs_there: no GPU adapter ({e})");
+            return;
+        }
+        Err(e) => panic!("{e}"),
+    };
+    if adapter.get_info().backend == wgpu::Backend::Gl && !gpu_required() {
+        println!("SKIP a_checker_on_the_callers_device_runs_there: a GL adapter");
+        return;
+    }
+    // The engine asks for every limit the adapter has and the features the image stage needs.
+    let features = adapter.features() & wgpu::Features::DEPTH32FLOAT_STENCIL8;
+    let (device, queue) =
+        frcd_gpu::request_device(&adapter, "engine", features, adapter.limits()).expect("device");
+    let engine = GpuDevice { device, queue };
+    let exact = Options {
+        backend: Backend::Gpgpu,
+        gpu: GpuPolicy::Require,
+        ..Options::default()
+    };
+    let checker = Checker::with_device(s.bodies.clone(), &s.exclude, exact.clone(), engine.clone())
+        .expect("the GPGPU backend on the engine's device");
+    assert!(checker.has_gpgpu());
+    let mut state = FrameState::default();
+    for poses in &s.frames {
+        let r = checker.check(poses, &mut state).expect("frame");
+        let got: Truth = r
+            .contacts
+            .iter()
+            .map(|c| (c.a, c.b, c.pairs.clone(), c.contained.is_some()))
+            .collect();
+        assert_eq!(got, truth(&s, poses));
+    }
+    assert!(checker.gpu_submissions() >= s.frames.len() as u64);
+    // Image space (fast mode) on the same device: only true interference reported.
+    #[cfg(feature = "image")]
+    if features.contains(wgpu::Features::DEPTH32FLOAT_STENCIL8) {
+        let fast = Options {
+            mode: Accuracy::Fast,
+            backend: Backend::Image,
+            gpu: GpuPolicy::Require,
+            ..Options::default()
+        };
+        let checker = Checker::with_device(s.bodies.clone(), &s.exclude, fast, engine.clone())
+            .expect("the image backend on the engine's device");
+        assert!(checker.has_image());
+        let mut state = FrameState::default();
+        for poses in &s.frames {
+            let want = truth(&s, poses);
+            let r = checker.check(poses, &mut state).expect("frame");
+            for c in &r.contacts {
+                assert!(
+                    want.iter().any(|w| (w.0, w.1) == (c.a, c.b)),
+                    "fast mode reported {}-{}, which do not interfere",
+                    c.a,
+                    c.b
+                );
+            }
+        }
+    }
+    // A device with WebGL2's limits (no storage buffers in compute) cannot run the GPGPU stage:
+    // refused, though a headless checker of the same options runs.
+    let (small, small_queue) = frcd_gpu::request_device(
+        &adapter,
+        "small engine",
+        wgpu::Features::empty(),
+        wgpu::Limits::downlevel_webgl2_defaults(),
+    )
+    .expect("small device");
+    let refused = Checker::with_device(
+        s.bodies.clone(),
+        &s.exclude,
+        exact.clone(),
+        GpuDevice {
+            device: small,
+            queue: small_queue,
+        },
+    )
+    .unwrap_err();
+    assert!(
+        matches!(refused, HybridError::Gpu { stage: "gpgpu", .. }),
+        "{refused}"
+    );
+    assert!(Checker::new(s.bodies.clone(), &s.exclude, exact).is_ok());
 }
 
 /// Fast mode: everything reported is true; deep interference is found.
