@@ -404,7 +404,7 @@ fn containment_of_many_components_equals_the_oracle() {
     let big = shapes::torus(2.0, 0.9, 40, 20).expect("torus");
     let tbig = ObbTree::build(&big, &BuildOptions::default());
     let mut rng = StdRng::seed_from_u64(0x5eed_c0de);
-    let (mut inside, mut outside, mut checked) = (0, 0, 0);
+    let (mut inside, mut outside, mut checked, mut apart_checked) = (0, 0, 0, 0);
     for _ in 0..300 {
         // Three small spheres, one of them often wholly inside the torus's tube.
         let parts: Vec<TriMesh> = (0..3)
@@ -431,14 +431,48 @@ fn containment_of_many_components_equals_the_oracle() {
         assert_eq!(got, want);
         let back = frcd_obb::containment(&tsmall, &p, &tbig, &Pose::IDENTITY);
         assert_eq!(back, oracle::containment(&small, &p, &big, &Pose::IDENTITY));
+        // The clearance path's containment (surfaces proved apart first), both directions.
+        for (swap, truth) in [(false, want), (true, back)] {
+            let mut cache = frcd_obb::ClearanceCache::new();
+            let (apart, _) = if swap {
+                frcd_obb::pair_clearance_apart(
+                    &tsmall,
+                    &p,
+                    &tbig,
+                    &Pose::IDENTITY,
+                    0.01,
+                    true,
+                    [None, None],
+                    &mut cache,
+                )
+            } else {
+                frcd_obb::pair_clearance_apart(
+                    &tbig,
+                    &Pose::IDENTITY,
+                    &tsmall,
+                    &p,
+                    0.01,
+                    true,
+                    [None, None],
+                    &mut cache,
+                )
+            };
+            if let Some(apart) = apart {
+                apart_checked += 1;
+                assert_eq!(
+                    apart.contained, truth,
+                    "pair_clearance_apart, swapped {swap}"
+                );
+            }
+        }
         match want {
             Some(_) => inside += 1,
             None => outside += 1,
         }
     }
     assert!(
-        checked > 100 && inside > 10 && outside > 10,
-        "{checked} {inside} {outside}"
+        checked > 100 && inside > 10 && outside > 10 && apart_checked > 100,
+        "{checked} {inside} {outside} {apart_checked}"
     );
 }
 

@@ -451,7 +451,9 @@ pub fn pair_clearance_apart(
 /// touch the other body's surface lies wholly inside or wholly outside it, so when the other
 /// body's surface is one connected component and one of its vertices lies outside that region,
 /// its component point is outside the solid: the parity test would say so, and is skipped.
-/// Otherwise the same parity tests, in the same order, with the same rays.
+/// Likewise, as in `contained`, a component with one of its six axis-extreme vertices outside
+/// the box holding the other mesh needs no ray. Otherwise the same parity tests, in the same
+/// order, with the same rays.
 fn containment_apart(
     a: &ObbTree,
     b: &ObbTree,
@@ -470,7 +472,10 @@ fn containment_apart(
                 )
         });
         if !outside {
-            for &p in &b.component_points {
+            for (&p, ext) in b.component_points.iter().zip(&b.component_extremes) {
+                if ext.iter().any(|&v| !a.aabb.contains_point(frame.point(v))) {
+                    continue;
+                }
                 let p = frame.point(p);
                 if crate::solid::point_inside_tree(p, a, None, CONTAINMENT_SEED) == Some(true) {
                     return Some(crate::Containment::BInsideA);
@@ -496,7 +501,11 @@ fn containment_apart(
         if outside {
             return None;
         }
-        for &p in &a.component_points {
+        let finite = rough.min.is_finite() && rough.max.is_finite();
+        for (&p, ext) in a.component_points.iter().zip(&a.component_extremes) {
+            if finite && ext.iter().any(|&v| !rough.contains_point(v)) {
+                continue;
+            }
             if crate::solid::point_inside_tree(p, b, Some((frame, slack)), CONTAINMENT_SEED)
                 == Some(true)
             {
