@@ -120,6 +120,11 @@ pub struct Opts {
     /// with the default's in one process (answers checked equal).
     #[arg(long = "checker-recheck-uncertain")]
     pub checker_recheck_uncertain: bool,
+    /// Checker section: also time GPGPU `check_pipelined` in both orders of a call's work
+    /// (`frcd_hybrid::Pipeline::set_decide_first`: frame k re-decided before or after frame
+    /// k+1's batch is submitted), alternated run by run in one process (answers checked equal).
+    #[arg(long = "checker-pipeline-orders")]
+    pub checker_pipeline_orders: bool,
     /// Time every GPU pass of the batches with GPU timestamps (where the adapter has
     /// timestamps inside passes) for the breakdown table; the host's split (waiting for the
     /// GPU, the CPU's re-decision) is always written.
@@ -762,6 +767,9 @@ pub fn run(mut o: Opts) -> Result<()> {
         if !changes.is_empty() {
             checker_variants(n, o.runs, warm, &changes)?;
         }
+        if o.checker_pipeline_orders {
+            checker_pipeline_orders(n, o.runs, warm)?;
+        }
     }
 
     let mut box_rows = Vec::new();
@@ -1397,6 +1405,84 @@ fn checker_variants(
             median(times[k].clone())
         );
     }
+    Ok(())
+}
+
+/// GPGPU `check_pipelined` per frame of the checker section in both orders of a call's work
+/// (re-deciding frame k first, or submitting frame k+1's batch first), in one process: one
+/// checker, one pipeline per order, every run one 8-frame sequence (and the flush) of each in
+/// turn, every other run in reverse order; prints each order's median and the median of the
+/// per-run ratios. The answers are checked equal to `check`'s first.
+fn checker_pipeline_orders(n: usize, runs: usize, warm: Duration) -> Result<()> {
+    use frcd_hybrid::{Checker, FrameState, Pipeline};
+    let (bodies, frames) = checker_scene(n);
+    let (gpu, _) = checker_options();
+    let checker = Checker::new(bodies, &[], gpu)?;
+    let key = |r: &frcd_hybrid::FrameResult| -> Vec<ContactKey> {
+        r.contacts
+            .iter()
+            .map(|c| (c.a, c.b, c.pairs.clone()))
+            .collect()
+    };
+    let mut state = FrameState::default();
+    let want: Vec<Vec<ContactKey>> = frames
+        .iter()
+        .map(|p| checker.check(p, &mut state).map(|r| key(&r)))
+        .collect::<Result<_, _>>()?;
+    let orders = [true, false];
+    let mut pipes: Vec<Pipeline> = orders
+        .iter()
+        .map(|&o| {
+            let mut p = Pipeline::new();
+            p.set_decide_first(o);
+            p
+        })
+        .collect();
+    for (pipe, order) in pipes.iter_mut().zip(orders) {
+        let mut got = Vec::new();
+        for poses in &frames {
+            got.extend(checker.check_pipelined(poses, pipe)?.map(|r| key(&r)));
+        }
+        got.extend(checker.flush_pipelined(pipe)?.map(|r| key(&r)));
+        if got != want {
+            bail!("checker, {n} parts: pipelined (decide first: {order}) differs from check");
+        }
+    }
+    let nf = frames.len() as f64;
+    let mut sequence = |k: usize| {
+        let t0 = Instant::now();
+        for poses in &frames {
+            std::hint::black_box(
+                checker
+                    .check_pipelined(poses, &mut pipes[k])
+                    .expect("checked"),
+            );
+        }
+        std::hint::black_box(checker.flush_pipelined(&mut pipes[k]).expect("checked"));
+        t0.elapsed().as_secs_f64() * 1e3 / nf
+    };
+    let t0 = Instant::now();
+    while t0.elapsed() < warm {
+        sequence(0);
+        sequence(1);
+    }
+    let mut times = [Vec::new(), Vec::new()];
+    for run in 0..runs {
+        let order: [usize; 2] = if run % 2 == 0 { [0, 1] } else { [1, 0] };
+        for k in order {
+            times[k].push(sequence(k));
+        }
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let ratio = median(times[0].iter().zip(&times[1]).map(|(a, b)| a / b).collect());
+    println!(
+        "checker, {n} parts, GPGPU check_pipelined: re-deciding first {:.2} ms, submitting first {:.2} ms per frame (medians of {runs}); first / second {ratio:.3} (median of per-run ratios)",
+        median(times[0].clone()),
+        median(times[1].clone())
+    );
     Ok(())
 }
 

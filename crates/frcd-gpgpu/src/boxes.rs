@@ -153,6 +153,41 @@ pub(crate) fn check_boxes(boxes: &[Aabb]) -> Result<(), GpuError> {
     }
 }
 
+/// A box pass submitted and not read yet ([`GpuContext::submit_broad_phase`]): owned (no
+/// borrow of the context or the scratch), so the caller can work while the GPU runs it, e.g.
+/// the CPU finishing frame k while the GPU finds frame k+1's body pairs.
+/// [`GpuContext::resolve_broad_phase`] reads it (waiting on its own submission only) and gives
+/// the scratch back. Dropping it unresolved is allowed (the work is discarded).
+#[must_use = "a submitted box pass is read by GpuContext::resolve_broad_phase"]
+pub struct SubmittedBoxes {
+    ctx_id: u64,
+    scratch: BoxScratch,
+    state: Submitted,
+}
+
+enum Submitted {
+    /// The all-pairs pass in flight: its boxes (for the f64 re-check of uncertain pairs).
+    InFlight {
+        boxes: Vec<Aabb>,
+        index: wgpu::SubmissionIndex,
+        out_bytes: u64,
+    },
+    /// Answered at submission (fewer than two boxes, or the sort-and-sweep, which runs its
+    /// passes at once).
+    Done(BodyPairs),
+}
+
+impl std::fmt::Debug for SubmittedBoxes {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SubmittedBoxes")
+            .field(
+                "in_flight",
+                &matches!(self.state, Submitted::InFlight { .. }),
+            )
+            .finish()
+    }
+}
+
 impl GpuContext {
     /// The all-pairs form of [`GpuContext::overlapping_bodies`] (O(n²) comparisons, tiled in
     /// workgroup memory): the same answer, kept as a reference and for small counts.
@@ -163,11 +198,108 @@ impl GpuContext {
         boxes: &[Aabb],
         scratch: &mut BoxScratch,
     ) -> Result<BodyPairs, GpuError> {
+        let mut answer = BodyPairs::default();
+        loop {
+            let Some((index, out_bytes)) = self.submit_all_pairs(boxes, scratch)? else {
+                return Ok(answer);
+            };
+            answer.submissions += 1;
+            if self.read_all_pairs(boxes, scratch, index, out_bytes, &mut answer)? {
+                return Ok(answer);
+            }
+        }
+    }
+
+    /// [`GpuContext::broad_phase`] submitted, not waited for: read it with
+    /// [`GpuContext::resolve_broad_phase`] (the same answer). The all-pairs pass (up to
+    /// [`crate::ALL_PAIRS_MAX_BODIES`] bodies) is queued and left running; the sort-and-sweep
+    /// above that runs its passes here and the resolve only hands its answer over.
+    ///
+    /// ```no_run
+    /// # use frcd_gpgpu::{BoxScratch, GpuContext};
+    /// # use frcd_geom::{Aabb, DVec3};
+    /// let ctx = GpuContext::headless()?;
+    /// let boxes: Vec<Aabb> = (0..64)
+    ///     .map(|i| Aabb::new(DVec3::X * i as f64, DVec3::X * i as f64 + DVec3::splat(1.5)))
+    ///     .collect();
+    /// let pending = ctx.submit_broad_phase(&boxes, BoxScratch::default())?;
+    /// // ... CPU work while the GPU runs the pass ...
+    /// let (found, _scratch) = ctx.resolve_broad_phase(pending)?;
+    /// assert_eq!(found.pairs.len(), 63);
+    /// # Ok::<(), frcd_gpgpu::GpuError>(())
+    /// ```
+    pub fn submit_broad_phase(
+        &self,
+        boxes: &[Aabb],
+        mut scratch: BoxScratch,
+    ) -> Result<SubmittedBoxes, GpuError> {
+        let state = if boxes.len() > crate::ALL_PAIRS_MAX_BODIES {
+            Submitted::Done(self.overlapping_bodies(boxes, &mut scratch)?)
+        } else {
+            match self.submit_all_pairs(boxes, &mut scratch)? {
+                None => Submitted::Done(BodyPairs::default()),
+                Some((index, out_bytes)) => Submitted::InFlight {
+                    boxes: boxes.to_vec(),
+                    index,
+                    out_bytes,
+                },
+            }
+        };
+        Ok(SubmittedBoxes {
+            ctx_id: self.id,
+            scratch,
+            state,
+        })
+    }
+
+    /// Reads a box pass [`GpuContext::submit_broad_phase`] queued (waiting on its submission
+    /// only: the device's other work, the caller's included, is not waited for) and gives the
+    /// scratch back; an output overflow re-runs the pass here. A pass submitted on another
+    /// context is [`GpuError::ForeignObject`].
+    pub fn resolve_broad_phase(
+        &self,
+        submitted: SubmittedBoxes,
+    ) -> Result<(BodyPairs, BoxScratch), GpuError> {
+        if submitted.ctx_id != self.id {
+            return Err(GpuError::ForeignObject("SubmittedBoxes"));
+        }
+        let SubmittedBoxes {
+            mut scratch, state, ..
+        } = submitted;
+        let (boxes, index, out_bytes) = match state {
+            Submitted::Done(answer) => return Ok((answer, scratch)),
+            Submitted::InFlight {
+                boxes,
+                index,
+                out_bytes,
+            } => (boxes, index, out_bytes),
+        };
+        let mut answer = BodyPairs {
+            submissions: 1,
+            ..BodyPairs::default()
+        };
+        if !self.read_all_pairs(&boxes, &mut scratch, index, out_bytes, &mut answer)? {
+            let again = self.overlapping_bodies_all_pairs(&boxes, &mut scratch)?;
+            answer = BodyPairs {
+                submissions: answer.submissions + again.submissions,
+                readbacks: answer.readbacks + again.readbacks,
+                ..again
+            };
+        }
+        Ok((answer, scratch))
+    }
+
+    /// Checks the boxes and queues one all-pairs pass; its submission and the bytes of output
+    /// to read back, or `None` for fewer than two boxes (no pair, nothing queued).
+    fn submit_all_pairs(
+        &self,
+        boxes: &[Aabb],
+        scratch: &mut BoxScratch,
+    ) -> Result<Option<(wgpu::SubmissionIndex, u64)>, GpuError> {
         check_boxes(boxes)?;
         let n = boxes.len();
-        let mut answer = BodyPairs::default();
         if n < 2 {
-            return Ok(answer);
+            return Ok(None);
         }
         let groups = (n as u64).div_ceil(BOX_TILE as u64);
         let max_groups = self.limits.max_compute_workgroups_per_dimension as u64;
@@ -179,52 +311,62 @@ impl GpuContext {
             });
         }
         let words: Vec<BodyBox> = boxes.iter().map(body_box).collect();
-        let (count, entries) = loop {
-            let bufs = scratch.ensure(self, n as u32)?;
-            self.queue
-                .write_buffer(&bufs.boxes, 0, bytemuck::cast_slice(&words));
-            self.queue.write_buffer(
-                &bufs.params,
-                0,
-                bytemuck::bytes_of(&BoxParams {
-                    n: [n as u32, bufs.output_cap, 0, 0],
-                }),
-            );
-            let mut enc = self
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("frcd-gpgpu boxes"),
-                });
-            enc.clear_buffer(&bufs.count, 0, None);
-            {
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("frcd-gpgpu boxes"),
-                    timestamp_writes: None,
-                });
-                pass.set_pipeline(&self.pipes.boxes);
-                pass.set_bind_group(0, &bufs.bind, &[]);
-                pass.dispatch_workgroups(groups as u32, groups as u32, 1);
+        let bufs = scratch.ensure(self, n as u32)?;
+        self.queue
+            .write_buffer(&bufs.boxes, 0, bytemuck::cast_slice(&words));
+        self.queue.write_buffer(
+            &bufs.params,
+            0,
+            bytemuck::bytes_of(&BoxParams {
+                n: [n as u32, bufs.output_cap, 0, 0],
+            }),
+        );
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("frcd-gpgpu boxes"),
+            });
+        enc.clear_buffer(&bufs.count, 0, None);
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("frcd-gpgpu boxes"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipes.boxes);
+            pass.set_bind_group(0, &bufs.bind, &[]);
+            pass.dispatch_workgroups(groups as u32, groups as u32, 1);
+        }
+        let out_bytes = bufs.output_cap as u64 * 8;
+        enc.copy_buffer_to_buffer(&bufs.count, 0, &bufs.staging, 0, 4);
+        enc.copy_buffer_to_buffer(&bufs.out, 0, &bufs.staging, 8, out_bytes);
+        Ok(Some((self.submit(enc.finish()), out_bytes)))
+    }
+
+    /// Reads an all-pairs pass into `answer` (one readback); false when its output overflowed
+    /// (the scratch then grows to the count found: submit again).
+    fn read_all_pairs(
+        &self,
+        boxes: &[Aabb],
+        scratch: &mut BoxScratch,
+        index: wgpu::SubmissionIndex,
+        out_bytes: u64,
+        answer: &mut BodyPairs,
+    ) -> Result<bool, GpuError> {
+        let bufs = scratch.bufs.as_ref().expect("submitted");
+        let output_cap = bufs.output_cap;
+        let bytes = self.read_back(&bufs.staging, 8 + out_bytes, index)?;
+        answer.readbacks += 1;
+        let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
+        let count = words[0];
+        if count > output_cap {
+            scratch.output_cap = count.max(output_cap.saturating_mul(2));
+            if answer.submissions > MAX_RERUNS {
+                return Err(GpuError::Internal("box pass keeps overflowing".into()));
             }
-            let out_bytes = bufs.output_cap as u64 * 8;
-            enc.copy_buffer_to_buffer(&bufs.count, 0, &bufs.staging, 0, 4);
-            enc.copy_buffer_to_buffer(&bufs.out, 0, &bufs.staging, 8, out_bytes);
-            let index = self.submit(enc.finish());
-            answer.submissions += 1;
-            let bytes = self.read_back(&bufs.staging, 8 + out_bytes, index)?;
-            answer.readbacks += 1;
-            let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
-            let count = words[0];
-            if count > bufs.output_cap {
-                scratch.output_cap = count.max(bufs.output_cap.saturating_mul(2));
-                if answer.submissions > MAX_RERUNS {
-                    return Err(GpuError::Internal("box pass keeps overflowing".into()));
-                }
-                continue;
-            }
-            break (count as usize, words);
-        };
-        decode(boxes, &entries[2..2 + 2 * count], &mut answer)?;
-        Ok(answer)
+            return Ok(false);
+        }
+        decode(boxes, &words[2..2 + 2 * count as usize], answer)?;
+        Ok(true)
     }
 }
 

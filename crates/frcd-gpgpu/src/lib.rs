@@ -69,7 +69,7 @@ mod query;
 pub mod shaders;
 mod sweep;
 
-pub use boxes::{BodyPairs, BoxScratch};
+pub use boxes::{BodyPairs, BoxScratch, SubmittedBoxes};
 pub use context::{
     EXACT_OFFSETS_ENV, GpuContext, HOST_FRONT_SOFTWARE, HeadlessOptions, Recheck, requirements,
 };

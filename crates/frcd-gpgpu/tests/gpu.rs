@@ -1006,6 +1006,91 @@ fn many_bodies_box_pass_equals_the_cpu() {
     ));
 }
 
+/// The box pass submitted and read later (`submit_broad_phase` / `resolve_broad_phase`) gives
+/// `broad_phase`'s answer on both paths (all pairs up to 256 bodies, the sort-and-sweep above),
+/// with a pair batch queued in between, through an output overflow, for 0 and 1 boxes; a pass
+/// read on another context is refused.
+#[test]
+fn a_box_pass_read_later_equals_the_one_waited_for() {
+    let Some(ctx) = new_context() else { return };
+    let mut rng = StdRng::seed_from_u64(17);
+    let scatter = |n: usize, rng: &mut StdRng| -> Vec<Aabb> {
+        let side = (n as f64 / 4.0).cbrt() * 2.0;
+        (0..n)
+            .map(|_| {
+                let c = DVec3::new(
+                    rng.random_range(0.0..side),
+                    rng.random_range(0.0..side),
+                    rng.random_range(0.0..side),
+                );
+                Aabb::new(c - DVec3::splat(0.5), c + DVec3::splat(0.5))
+            })
+            .collect()
+    };
+    let a = body(&ctx, shapes::icosphere(1.0, 2));
+    for n in [0usize, 1, 2, 64, 256, 300] {
+        let boxes = scatter(n, &mut rng);
+        let want = cpu_box_pairs(&boxes);
+        let waited = ctx.broad_phase(&boxes, &mut BoxScratch::default()).unwrap();
+        assert_eq!(waited.pairs, want, "{n} bodies, waited for");
+        // Tiny output: the read overflows and re-runs (where there are pairs).
+        let pending = ctx
+            .submit_broad_phase(&boxes, BoxScratch::with_capacity(1))
+            .unwrap();
+        // Other GPU work queued after the pass (a pair batch) does not change its answer.
+        let other = ctx
+            .submit_batch(
+                &[(
+                    &a.gpu,
+                    &Pose::IDENTITY,
+                    &a.gpu,
+                    &Pose::from_translation(DVec3::X),
+                )],
+                QueryScratch::default(),
+            )
+            .unwrap();
+        let (got, scratch) = ctx.resolve_broad_phase(pending).unwrap();
+        assert_eq!(got.pairs, want, "{n} bodies, read later");
+        if want.len() > 1 && n <= 256 {
+            assert!(got.submissions >= 2 && got.readbacks >= 2, "{n}: {got:?}");
+            assert!(scratch.capacity() >= want.len() as u32);
+        }
+        let (batch, _) = ctx.resolve_batch(other).unwrap();
+        assert_eq!(
+            batch.results[0].pairs,
+            oracle::pairs(
+                &a.mesh,
+                &Pose::IDENTITY,
+                &a.mesh,
+                &Pose::from_translation(DVec3::X)
+            )
+        );
+        // The grown scratch again: one submission, one readback.
+        let (again, _) = ctx
+            .resolve_broad_phase(ctx.submit_broad_phase(&boxes, scratch).unwrap())
+            .unwrap();
+        assert_eq!(again.pairs, want);
+        if (2..=256).contains(&n) {
+            assert_eq!((again.submissions, again.readbacks), (1, 1), "{n}");
+        }
+    }
+    let boxes = scatter(64, &mut rng);
+    let pending = ctx
+        .submit_broad_phase(&boxes, BoxScratch::default())
+        .unwrap();
+    if let Some(other) = new_context() {
+        assert!(matches!(
+            other.resolve_broad_phase(pending),
+            Err(GpuError::ForeignObject(_))
+        ));
+    }
+    let nan = [Aabb::new(DVec3::splat(f64::NAN), DVec3::ONE), boxes[0]];
+    assert!(matches!(
+        ctx.submit_broad_phase(&nan, BoxScratch::default()),
+        Err(GpuError::InvalidInput(_))
+    ));
+}
+
 fn adapter_and_device(
     limits: frcd_gpgpu::wgpu::Limits,
 ) -> Option<(

@@ -2,11 +2,13 @@
 //!
 //! [`Checker::check_pipelined`] takes frame k+1's poses and returns frame k's answer (one frame
 //! of latency). Per call: frame k+1's rough colliding set is computed (the broad phase, on the
-//! backend [`Checker::check`] would use) and its GPU body pairs are **submitted** (one batch,
-//! one submission); then frame k's batch, submitted one call earlier, is read back and its
-//! touching pairs re-decided exactly on the CPU, and frame k runs through [`Checker::check`]
-//! with its rough colliding set and GPU answers already in hand (CPU pairs, solid mode,
-//! segments, clearance) while the GPU works on frame k+1. The broad phase runs once per frame.
+//! backend [`Checker::check`] would use; a GPU box pass is submitted and read) and its GPU body
+//! pairs are **submitted** (one batch, one submission); then frame k's batch, submitted one
+//! call earlier, is read back and its touching pairs re-decided exactly on the CPU, and frame k
+//! runs through [`Checker::check`] with its rough colliding set and GPU answers already in hand
+//! (CPU pairs, solid mode, segments, clearance) while the GPU works on frame k+1
+//! ([`Pipeline::set_decide_first`] re-decides frame k before frame k+1's batch is submitted
+//! instead, while the GPU runs frame k+1's box pass). The broad phase runs once per frame.
 //! The answers equal [`Checker::check`]'s frame for frame: the same stages run on the same
 //! poses; the broad phase and the GPU pairs are only computed earlier.
 
@@ -51,6 +53,16 @@ impl std::fmt::Debug for RcsAhead {
 #[cfg(feature = "gpgpu")]
 type PrevFrame = (Vec<Pose>, HashSet<(u32, u32)>);
 
+/// A frame ahead of its turn, begun ([`Checker::begin_ahead`]): its poses, its rough colliding
+/// set begun (a GPU box pass possibly in flight), the notes so far and the time spent.
+#[cfg(feature = "gpgpu")]
+struct AheadStart {
+    poses: Vec<Pose>,
+    rcs: crate::rcs::RcsStart,
+    notes: FrameResult,
+    time: std::time::Duration,
+}
+
 /// A frame computed ahead: its rough colliding set and its GPU batch, submitted and not yet
 /// read (none when no pair goes to the GPU or the submission failed).
 #[cfg(feature = "gpgpu")]
@@ -86,6 +98,8 @@ pub struct Pipeline {
     state: FrameState,
     /// Owner of the pipeline (a checker's serial; 0: none yet).
     owner: u64,
+    /// Re-decide frame k before submitting frame k+1's batch ([`Pipeline::set_decide_first`]).
+    decide_first: bool,
     /// The frame held back: its poses (checked at the next call).
     held: Option<Vec<Pose>>,
     #[cfg(feature = "gpgpu")]
@@ -111,15 +125,34 @@ impl Pipeline {
         self.held.is_some()
     }
 
+    /// The order of a call's work: `true` re-decides frame k's GPU pairs while the GPU runs
+    /// frame k+1's box pass, before frame k+1's batch is submitted (the pass's latency is then
+    /// spent on the re-decision); `false` (the default) submits that batch first, so that the
+    /// re-decision overlaps its traversal. The answers are the same either way. On the 2-core
+    /// software-driver host (lavapipe, 2026-12-02) `true` took 1.01-1.09 of the default's time
+    /// on the 64-part checker frame (three runs of 21 in one process,
+    /// `cargo xtask bench gpgpu --checker-pipeline-orders`), so the default stays.
+    pub fn set_decide_first(&mut self, decide_first: bool) {
+        self.decide_first = decide_first;
+    }
+
+    /// The order set by [`Pipeline::set_decide_first`].
+    pub fn decide_first(&self) -> bool {
+        self.decide_first
+    }
+
     /// The frame state (coherence caches, broad phase) of the frames answered so far.
     pub fn state(&self) -> &FrameState {
         &self.state
     }
 
     /// Drops the held frame and its GPU work, forgets every cached answer and the checker the
-    /// pipeline belonged to.
+    /// pipeline belonged to (the order of [`Pipeline::set_decide_first`] is kept).
     pub fn reset(&mut self) {
-        *self = Self::default();
+        *self = Self {
+            decide_first: self.decide_first,
+            ..Self::default()
+        };
     }
 }
 
@@ -144,15 +177,25 @@ impl Checker {
         }
         pipe.owner = self.serial;
         #[cfg(feature = "gpgpu")]
-        let next = self.submit_ahead(poses, pipe)?;
+        let start = self.begin_ahead(poses, pipe)?;
         let held = pipe.held.replace(poses.to_vec());
         #[cfg(feature = "gpgpu")]
-        let current = std::mem::replace(&mut pipe.in_flight, next);
+        {
+            let current = pipe.in_flight.take();
+            // Frame k's batch is read and re-decided after frame k+1's batch is submitted (the
+            // re-decision overlaps its traversal), or while the GPU runs frame k+1's box pass
+            // (`Pipeline::set_decide_first`).
+            if pipe.decide_first {
+                self.read_in_flight(current, pipe)?;
+                pipe.in_flight = self.finish_ahead(start, pipe)?;
+            } else {
+                pipe.in_flight = self.finish_ahead(start, pipe)?;
+                self.read_in_flight(current, pipe)?;
+            }
+        }
         let Some(held) = held else {
             return Ok(None);
         };
-        #[cfg(feature = "gpgpu")]
-        self.read_in_flight(current, pipe)?;
         self.check(&held, &mut pipe.state).map(Some)
     }
 
@@ -189,36 +232,60 @@ impl Checker {
         Ok(())
     }
 
-    /// Frame `poses` ahead of its turn: its rough colliding set (on the pipeline's frame
-    /// state, whose broad phase thereby moves one frame ahead of the answers) and its GPU
-    /// pairs (those [`Checker::check`] will send to the GPU: overlapping, not reused, chosen by
-    /// the cost model) submitted as one batch. `None` when no GPU pair stage runs (then
+    /// Frame `poses` ahead of its turn, first half: the rough colliding set begun on the
+    /// pipeline's frame state (whose broad phase thereby moves one frame ahead of the answers;
+    /// a GPU box pass is submitted, not waited for). `None` when no GPU pair stage runs (then
     /// [`Checker::check`] runs the frame's broad phase itself).
     #[cfg(feature = "gpgpu")]
-    fn submit_ahead(
+    fn begin_ahead(
         &self,
         poses: &[Pose],
         pipe: &mut Pipeline,
-    ) -> Result<Option<InFlight>, HybridError> {
-        let Some(g) = self
-            .gpgpu
-            .as_ref()
-            .filter(|_| self.options.mode == crate::Accuracy::Exact)
-        else {
+    ) -> Result<Option<AheadStart>, HybridError> {
+        if self.gpgpu.is_none() || self.options.mode != crate::Accuracy::Exact {
             return Ok(None);
-        };
+        }
         if pipe.state.world.is_none() {
             self.bind(&mut pipe.state, poses)?;
         }
         let t0 = std::time::Instant::now();
         let mut notes = FrameResult::empty();
-        let (candidates, backend) = self.rough_colliding_set(poses, &mut pipe.state, &mut notes)?;
+        let rcs = self.rcs_begin(poses, &mut pipe.state, &mut notes)?;
+        Ok(Some(AheadStart {
+            poses: poses.to_vec(),
+            rcs,
+            notes,
+            time: t0.elapsed(),
+        }))
+    }
+
+    /// Second half: the rough colliding set finished and the frame's GPU pairs (those
+    /// [`Checker::check`] will send to the GPU: overlapping, not reused, chosen by the cost
+    /// model) submitted as one batch.
+    #[cfg(feature = "gpgpu")]
+    fn finish_ahead(
+        &self,
+        start: Option<AheadStart>,
+        pipe: &mut Pipeline,
+    ) -> Result<Option<InFlight>, HybridError> {
+        let (Some(start), Some(g)) = (start, self.gpgpu.as_ref()) else {
+            return Ok(None);
+        };
+        let AheadStart {
+            poses,
+            rcs,
+            mut notes,
+            time,
+        } = start;
+        let t0 = std::time::Instant::now();
+        let (candidates, backend) = self.rcs_finish(rcs, &mut pipe.state, &mut notes)?;
         let rcs = RcsAhead {
             candidates,
             backend,
-            time_us: t0.elapsed().as_secs_f64() * 1e6,
+            time_us: (time + t0.elapsed()).as_secs_f64() * 1e6,
             notes: notes.notes,
         };
+        let poses = poses.as_slice();
         // Only pairs whose raw boxes overlap run the collision query (the others are in the
         // set for their clearance only).
         let overlapping: Vec<(u32, u32)> = rcs

@@ -21,6 +21,14 @@ fn box_gap(a: &Aabb, b: &Aabb) -> f64 {
     (a.min - b.max).max(b.min - a.max).max(DVec3::ZERO).length()
 }
 
+/// A rough colliding set begun ([`Checker::rcs_begin`]): the World moved to the frame's poses
+/// and, when the GPU box pass runs, that pass submitted and not yet read.
+pub(crate) struct RcsStart {
+    margin: f64,
+    #[cfg(feature = "gpgpu")]
+    pending: Option<frcd_gpgpu::SubmittedBoxes>,
+}
+
 impl Checker {
     /// Moves the state's World to `poses` and returns the pairs to look at: boxes overlapping,
     /// or closer than the pair's clearance threshold. Sorted by `(a, b)`.
@@ -28,8 +36,21 @@ impl Checker {
         &self,
         poses: &[frcd_geom::Pose],
         state: &mut FrameState,
-        #[allow(unused_variables)] result: &mut FrameResult,
+        result: &mut FrameResult,
     ) -> Result<(Vec<Candidate>, StageBackend), HybridError> {
+        let start = self.rcs_begin(poses, state, result)?;
+        self.rcs_finish(start, state, result)
+    }
+
+    /// The first half of [`Checker::rough_colliding_set`]: moves the World to `poses` and, when
+    /// the GPU box pass is chosen, submits it (read by [`Checker::rcs_finish`], so the caller
+    /// can work while the GPU runs it). A GPU failure here leaves the pass to the CPU.
+    pub(crate) fn rcs_begin(
+        &self,
+        poses: &[frcd_geom::Pose],
+        state: &mut FrameState,
+        #[allow(unused_variables)] result: &mut FrameResult,
+    ) -> Result<RcsStart, HybridError> {
         let world = state.world.as_mut().expect("bound by check");
         state.updates.clear();
         state
@@ -38,9 +59,11 @@ impl Checker {
         world.set_poses(&state.updates)?;
         let margin = world.max_clearance().unwrap_or(0.0);
         #[allow(unused_mut)]
-        let mut found: Option<Vec<(u32, u32)>> = None;
-        #[allow(unused_mut)]
-        let mut backend = StageBackend::Cpu;
+        let mut start = RcsStart {
+            margin,
+            #[cfg(feature = "gpgpu")]
+            pending: None,
+        };
         #[cfg(feature = "gpgpu")]
         if let Some(g) = &self.gpgpu {
             let n = state.ids.len();
@@ -58,22 +81,48 @@ impl Checker {
                             .inflated(margin * 0.5)
                     })
                     .collect();
-                match g.ctx.broad_phase(&boxes, &mut state.gpu_boxes) {
-                    Ok(f) => {
-                        let mut v: Vec<(u32, u32)> = f
-                            .pairs
-                            .into_iter()
-                            .map(|(i, j)| (i.min(j), i.max(j)))
-                            .filter(|&(i, j)| self.testable(i, j))
-                            .collect();
-                        v.sort_unstable();
-                        found = Some(v);
-                        backend = StageBackend::Gpu;
-                    }
+                let scratch = std::mem::take(&mut state.gpu_boxes);
+                match g.ctx.submit_broad_phase(&boxes, scratch) {
+                    Ok(p) => start.pending = Some(p),
                     Err(e) => self.gpu_failed("box pass", e.into(), result)?,
                 }
             }
         }
+        Ok(start)
+    }
+
+    /// The second half of [`Checker::rough_colliding_set`]: reads the GPU box pass
+    /// [`Checker::rcs_begin`] submitted (or runs the World's broad phase) and filters the pairs.
+    pub(crate) fn rcs_finish(
+        &self,
+        #[allow(unused_mut)] mut start: RcsStart,
+        state: &mut FrameState,
+        #[allow(unused_variables)] result: &mut FrameResult,
+    ) -> Result<(Vec<Candidate>, StageBackend), HybridError> {
+        let margin = start.margin;
+        #[allow(unused_mut)]
+        let mut found: Option<Vec<(u32, u32)>> = None;
+        #[allow(unused_mut)]
+        let mut backend = StageBackend::Cpu;
+        #[cfg(feature = "gpgpu")]
+        if let (Some(g), Some(pending)) = (&self.gpgpu, start.pending.take()) {
+            match g.ctx.resolve_broad_phase(pending) {
+                Ok((f, scratch)) => {
+                    state.gpu_boxes = scratch;
+                    let mut v: Vec<(u32, u32)> = f
+                        .pairs
+                        .into_iter()
+                        .map(|(i, j)| (i.min(j), i.max(j)))
+                        .filter(|&(i, j)| self.testable(i, j))
+                        .collect();
+                    v.sort_unstable();
+                    found = Some(v);
+                    backend = StageBackend::Gpu;
+                }
+                Err(e) => self.gpu_failed("box pass", e.into(), result)?,
+            }
+        }
+        let world = state.world.as_mut().expect("bound by check");
         let found = match found {
             Some(v) => v,
             None => world

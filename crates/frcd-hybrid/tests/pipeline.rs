@@ -85,6 +85,14 @@ fn answer(r: &FrameResult) -> impl PartialEq + std::fmt::Debug {
 /// Runs the scene with `check` and with `check_pipelined` on two checkers of `options`;
 /// returns the two checkers (for their counters) and the number of frames with contacts.
 fn compare(options: Options) -> Result<(Checker, Checker, usize), HybridError> {
+    compare_in(options, false)
+}
+
+/// [`compare`] with the pipeline's order of work ([`Pipeline::set_decide_first`]).
+fn compare_in(
+    options: Options,
+    decide_first: bool,
+) -> Result<(Checker, Checker, usize), HybridError> {
     let (bodies, exclude, frames) = scene();
     let plain = Checker::new(bodies.clone(), &exclude, options.clone())?;
     let piped = Checker::new(bodies, &exclude, options)?;
@@ -94,6 +102,7 @@ fn compare(options: Options) -> Result<(Checker, Checker, usize), HybridError> {
         .map(|p| plain.check(p, &mut state))
         .collect::<Result<_, _>>()?;
     let mut pipe = Pipeline::new();
+    pipe.set_decide_first(decide_first);
     let mut got = Vec::new();
     for (k, poses) in frames.iter().enumerate() {
         let out = piped.check_pipelined(poses, &mut pipe)?;
@@ -158,6 +167,16 @@ fn pipelined_equals_plain_on_the_gpu() {
         "{}",
         plain.gpu_submissions()
     );
+    assert_eq!(piped.gpu_submissions(), plain.gpu_submissions());
+    // The other order of a call's work (frame k re-decided before frame k+1's batch is
+    // submitted): the same answers and submissions.
+    let options = Options {
+        backend: Backend::Gpgpu,
+        gpu: GpuPolicy::Require,
+        clearance: Some(0.2),
+        ..Options::default()
+    };
+    let (plain, piped, _) = compare_in(options, true).expect("gpgpu backend");
     assert_eq!(piped.gpu_submissions(), plain.gpu_submissions());
 }
 
