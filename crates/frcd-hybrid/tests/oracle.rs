@@ -112,6 +112,14 @@ fn scene(seed: u64, n: usize, frames: usize, with_open: bool) -> GenScene {
 /// The oracle's interfering pairs `(a, b, pairs, contained)` of one frame.
 type Truth = Vec<(usize, usize, Vec<(u32, u32)>, bool)>;
 
+/// A frame's answer in the oracle's form.
+fn answer_of(r: &frcd_hybrid::FrameResult) -> Truth {
+    r.contacts
+        .iter()
+        .map(|c| (c.a, c.b, c.pairs.clone(), c.contained.is_some()))
+        .collect()
+}
+
 fn truth(s: &GenScene, poses: &[Pose]) -> Truth {
     let mut out = Vec::new();
     for a in 0..s.bodies.len() {
@@ -141,12 +149,7 @@ fn run(s: &GenScene, options: Options) -> Result<(Vec<Truth>, Vec<Truth>, Checke
     let mut want = Vec::new();
     for poses in &s.frames {
         let r = checker.check(poses, &mut state)?;
-        got.push(
-            r.contacts
-                .iter()
-                .map(|c| (c.a, c.b, c.pairs.clone(), c.contained.is_some()))
-                .collect(),
-        );
+        got.push(answer_of(&r));
         want.push(truth(s, poses));
     }
     Ok((want, got, checker))
@@ -369,12 +372,7 @@ fn exact_gpgpu_and_gpu_heavy_hybrid_equal_oracle() {
         let r = checker.check(poses, &mut st).unwrap();
         assert_eq!(r.stages[0].backend, StageBackend::Gpu);
         assert!(r.contacts.iter().all(|c| c.via == Via::Gpu));
-        let got: Truth = r
-            .contacts
-            .iter()
-            .map(|c| (c.a, c.b, c.pairs.clone(), c.contained.is_some()))
-            .collect();
-        assert_eq!(got, truth(&s, poses));
+        assert_eq!(answer_of(&r), truth(&s, poses));
     }
 }
 
@@ -415,12 +413,7 @@ fn a_checker_on_the_callers_device_runs_there() {
     let mut state = FrameState::default();
     for poses in &s.frames {
         let r = checker.check(poses, &mut state).expect("frame");
-        let got: Truth = r
-            .contacts
-            .iter()
-            .map(|c| (c.a, c.b, c.pairs.clone(), c.contained.is_some()))
-            .collect();
-        assert_eq!(got, truth(&s, poses));
+        assert_eq!(answer_of(&r), truth(&s, poses));
     }
     assert!(checker.gpu_submissions() >= s.frames.len() as u64);
     // Image space (fast mode) on the same device: only true interference reported.
