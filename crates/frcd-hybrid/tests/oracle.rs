@@ -442,6 +442,34 @@ fn a_checker_on_the_callers_device_runs_there() {
             }
         }
     }
+    // The hybrid backend (GPU not required) costs the caller's device as the adapter it is: a
+    // software one is not used for image space unless the cost model was calibrated on it,
+    // a hardware one is.
+    #[cfg(feature = "image")]
+    if features.contains(wgpu::Features::DEPTH32FLOAT_STENCIL8) {
+        let software = adapter.get_info().device_type == wgpu::DeviceType::Cpu;
+        let fast = Options {
+            mode: Accuracy::Fast,
+            cost: CostModel {
+                image_us: Some(0.0),
+                ..CostModel::default()
+            },
+            ..Options::default()
+        };
+        let checker = Checker::with_device(s.bodies.clone(), &s.exclude, fast, engine.clone())
+            .expect("hybrid backend on the engine's device");
+        assert_eq!(checker.has_image(), !software, "{:?}", checker.notes());
+        if software {
+            assert!(
+                checker
+                    .notes()
+                    .iter()
+                    .any(|n| n.contains("software adapter")),
+                "{:?}",
+                checker.notes()
+            );
+        }
+    }
     // A device with WebGL2's limits (no storage buffers in compute) cannot run the GPGPU stage:
     // refused, though a headless checker of the same options runs.
     let (small, small_queue) = frcd_gpu::request_device(

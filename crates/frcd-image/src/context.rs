@@ -59,9 +59,9 @@ impl ImageContext {
         frcd_gpu::with_creation_lock((device, queue), |(device, queue)| {
             Self::check(&device)?;
             Ok(Self {
+                adapter: Some(device.adapter_info()),
                 device,
                 queue,
-                adapter: None,
                 _release: frcd_gpu::ReleaseCreationLock::default(),
             })
         })
@@ -184,12 +184,14 @@ impl ImageContext {
         &self.queue
     }
 
-    /// The adapter description when this context created the device ([`ImageContext::headless`]).
+    /// The adapter description: the adapter this context created the device on
+    /// ([`ImageContext::headless`]) or the caller's device's ([`ImageContext::from_device`]).
     pub fn adapter_info(&self) -> Option<&wgpu::AdapterInfo> {
         self.adapter.as_ref()
     }
 
-    /// A short adapter name for reports ("caller's device" when the caller supplied it).
+    /// A short adapter name for reports ("caller's device" when no adapter description is
+    /// known).
     pub fn adapter_name(&self) -> String {
         match &self.adapter {
             Some(i) => format!("{} ({:?}, {:?})", i.name, i.device_type, i.backend),
