@@ -66,11 +66,11 @@ pub enum GpuPolicy {
     Auto,
     /// Never create a GPU device.
     Off,
-    /// Fail with [`HybridError::Gpu`] when a wanted GPU device cannot be created.
+    /// Fail with [`HybridError::Gpu`](crate::HybridError::Gpu) when a wanted GPU device cannot be created.
     Require,
 }
 
-/// Options of a [`Checker`]. Plain data with [`Default`] (exact, hybrid, solid, no segments).
+/// Options of a [`Checker`](crate::Checker). Plain data with [`Default`] (exact, hybrid, solid, no segments).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Options {
     /// Exact or fast.

@@ -66,7 +66,7 @@ pub struct PairContact {
     pub pairs: Vec<(u32, u32)>,
     /// Solid mode: containment when no surface pair touches.
     pub contained: Option<Containment>,
-    /// With [`Options::segments`]: the contact of each pair of `pairs`, in A's local frame.
+    /// With [`Options::segments`](crate::Options::segments): the contact of each pair of `pairs`, in A's local frame.
     pub segments: Vec<Option<Contact>>,
     /// How the answer was obtained.
     pub via: Via,
