@@ -1185,6 +1185,20 @@ fn plot(path: &std::path::Path, rows: &[PairRow], threads: usize, adapter: &str)
 /// A contact as compared between modes: body pair and its triangle pairs.
 type ContactKey = (usize, usize, Vec<(u32, u32)>);
 
+/// A checker frame's contacts as `(a, b, triangle pairs)`, for comparing answers.
+fn contact_keys(r: &frcd_hybrid::FrameResult) -> Vec<ContactKey> {
+    r.contacts
+        .iter()
+        .map(|c| (c.a, c.b, c.pairs.clone()))
+        .collect()
+}
+
+/// The median (upper middle) of a non-empty list.
+fn median_of(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
 struct CheckerRow {
     parts: usize,
     triangles: usize,
@@ -1205,12 +1219,7 @@ fn checker_row(n: usize, runs: usize, warm: Duration) -> Result<CheckerRow> {
     let c_cpu = Checker::new(bodies.clone(), &[], cpu)?;
     let c_gpu = Checker::new(bodies.clone(), &[], gpu.clone())?;
     let c_pipe = Checker::new(bodies, &[], gpu)?;
-    let key = |r: &frcd_hybrid::FrameResult| -> Vec<ContactKey> {
-        r.contacts
-            .iter()
-            .map(|c| (c.a, c.b, c.pairs.clone()))
-            .collect()
-    };
+    let key = contact_keys;
     // Correctness first (and warm-up): the three agree on every frame.
     let mut contacts = 0usize;
     {
@@ -1351,12 +1360,7 @@ fn checker_variants(
     for (name, o) in changes {
         variants.push((name.clone(), Checker::new(bodies.clone(), &[], o.clone())?));
     }
-    let key = |r: &frcd_hybrid::FrameResult| -> Vec<ContactKey> {
-        r.contacts
-            .iter()
-            .map(|c| (c.a, c.b, c.pairs.clone()))
-            .collect()
-    };
+    let key = contact_keys;
     let mut states: Vec<FrameState> = variants.iter().map(|_| FrameState::default()).collect();
     let mut cpu_state = FrameState::default();
     for poses in &frames {
@@ -1394,10 +1398,7 @@ fn checker_variants(
             times[k].push(sequence(k));
         }
     }
-    let median = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
+    let median = median_of;
     for (k, (name, _)) in variants.iter().enumerate() {
         let ratio = median(times[k].iter().zip(&times[0]).map(|(a, b)| a / b).collect());
         println!(
@@ -1418,12 +1419,7 @@ fn checker_pipeline_orders(n: usize, runs: usize, warm: Duration) -> Result<()> 
     let (bodies, frames) = checker_scene(n);
     let (gpu, _) = checker_options();
     let checker = Checker::new(bodies, &[], gpu)?;
-    let key = |r: &frcd_hybrid::FrameResult| -> Vec<ContactKey> {
-        r.contacts
-            .iter()
-            .map(|c| (c.a, c.b, c.pairs.clone()))
-            .collect()
-    };
+    let key = contact_keys;
     let mut state = FrameState::default();
     let want: Vec<Vec<ContactKey>> = frames
         .iter()
@@ -1473,10 +1469,7 @@ fn checker_pipeline_orders(n: usize, runs: usize, warm: Duration) -> Result<()> 
             times[k].push(sequence(k));
         }
     }
-    let median = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
+    let median = median_of;
     let ratio = median(times[0].iter().zip(&times[1]).map(|(a, b)| a / b).collect());
     println!(
         "checker, {n} parts, GPGPU check_pipelined: re-deciding first {:.2} ms, submitting first {:.2} ms per frame (medians of {runs}); first / second {ratio:.3} (median of per-run ratios)",

@@ -185,11 +185,26 @@ impl Checker {
             // Frame k's batch is read and re-decided after frame k+1's batch is submitted (the
             // re-decision overlaps its traversal), or while the GPU runs frame k+1's box pass
             // (`Pipeline::set_decide_first`).
+            // A failure to finish frame k+1 ahead leaves frame k held (it is not answered
+            // yet), as a refusal before anything is held would; its batch is read next call.
             if pipe.decide_first {
                 self.read_in_flight(current, pipe)?;
-                pipe.in_flight = self.finish_ahead(start, pipe)?;
+                match self.finish_ahead(start, pipe) {
+                    Ok(next) => pipe.in_flight = next,
+                    Err(e) => {
+                        pipe.held = held;
+                        return Err(e);
+                    }
+                }
             } else {
-                pipe.in_flight = self.finish_ahead(start, pipe)?;
+                match self.finish_ahead(start, pipe) {
+                    Ok(next) => pipe.in_flight = next,
+                    Err(e) => {
+                        pipe.held = held;
+                        pipe.in_flight = current;
+                        return Err(e);
+                    }
+                }
                 self.read_in_flight(current, pipe)?;
             }
         }
