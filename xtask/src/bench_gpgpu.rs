@@ -115,6 +115,16 @@ pub struct Opts {
         value_delimiter = ','
     )]
     pub checker_host_front: Vec<u32>,
+    /// Checker section: also time GPGPU `check` with the pair batch's traversal in one dispatch
+    /// of these workgroups (`frcd_hybrid::Options::gpu_one_pass`; 0: one dispatch per level),
+    /// each with the default CPU front and with every front of `--checker-host-front`,
+    /// alternated run by run with the default's in one process (answers checked equal).
+    #[arg(
+        long = "checker-one-pass",
+        value_name = "WORKGROUPS,..",
+        value_delimiter = ','
+    )]
+    pub checker_one_pass: Vec<u32>,
     /// Checker section: also time GPGPU `check` re-deciding only the pairs the GPU left
     /// uncertain (`frcd_hybrid::Options::gpu_recheck_certified` false), alternated run by run
     /// with the default's in one process (answers checked equal).
@@ -753,6 +763,19 @@ pub fn run(mut o: Opts) -> Result<()> {
             ..gpu.clone()
         };
         changes.push((format!("a CPU front of {t} box tests per level"), options));
+    }
+    for &g in &o.checker_one_pass {
+        for front in std::iter::once(None).chain(o.checker_host_front.iter().map(|&t| Some(t))) {
+            let options = frcd_hybrid::Options {
+                gpu_one_pass: Some(g),
+                gpu_host_front: front,
+                ..gpu.clone()
+            };
+            let front = front.map_or("the default CPU front".into(), |t| {
+                format!("a CPU front of {t} box tests per level")
+            });
+            changes.push((format!("one pass of {g} workgroups, {front}"), options));
+        }
     }
     if o.checker_recheck_uncertain {
         let options = frcd_hybrid::Options {

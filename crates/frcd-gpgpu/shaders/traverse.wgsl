@@ -673,17 +673,9 @@ fn append_args(base: u32, k: u32) {
     }
 }
 
-// One listed triangle pair per invocation: the triangle test, and the pair appended to the
-// output (`frontier_out` is bound to the output buffer here) unless it is certainly disjoint.
-@compute @workgroup_size(64)
-fn triangles(@builtin(workgroup_id) wid: vec3<u32>,
-             @builtin(local_invocation_index) lid: u32) {
-    let m = min(atomicLoad(&state.tris), params.caps2.x);
-    let idx = (wid.y * grid_x(m) + wid.x) * WG + lid;
-    if idx >= m {
-        return;
-    }
-    let entry = frontier_in[idx];
+// The triangle test of one listed pair: (pair, triangle of A, triangle of B | UNCERTAIN_FLAG,
+// 1 unless certainly disjoint), as input-mesh indices.
+fn test_listed(entry: vec4<u32>) -> vec4<u32> {
     // The pose from its texels; the exact path's words from the pair table (its limbs are read
     // by `exact_w`).
     load_pose(entry.x);
@@ -698,16 +690,97 @@ fn triangles(@builtin(workgroup_id) wid: vec3<u32>,
     let b1 = texel(tris, sb, 1u);
     let b2 = texel(tris, sb, 2u);
     let r = tri_pair(entry.x, a0, a1, a2, b0, b1, b2);
-    if r != TRI_DISJOINT {
+    var tag = u32(b0.w);
+    if r == TRI_UNCERTAIN {
+        tag = tag | UNCERTAIN_FLAG;
+    }
+    return vec4<u32>(entry.x, u32(a0.w), tag, select(0u, 1u, r != TRI_DISJOINT));
+}
+
+// One listed triangle pair per invocation: the triangle test, and the pair appended to the
+// output (`frontier_out` is bound to the output buffer here) unless it is certainly disjoint.
+@compute @workgroup_size(64)
+fn triangles(@builtin(workgroup_id) wid: vec3<u32>,
+             @builtin(local_invocation_index) lid: u32) {
+    let m = min(atomicLoad(&state.tris), params.caps2.x);
+    let idx = (wid.y * grid_x(m) + wid.x) * WG + lid;
+    if idx >= m {
+        return;
+    }
+    let t = test_listed(frontier_in[idx]);
+    if t.w != 0u {
         let o = atomicAdd(&state.out, 1u);
         if o < params.caps.y {
-            var tag = u32(b0.w);
-            if r == TRI_UNCERTAIN {
-                tag = tag | UNCERTAIN_FLAG;
-            }
-            frontier_out[o] = vec4<u32>(entry.x, u32(a0.w), tag, 0u);
+            frontier_out[o] = vec4<u32>(t.xyz, 0u);
         }
     }
+}
+
+// One frontier entry expanded: its (up to) four child pairs, child x of A's with child y of
+// B's, tested. One invocation rather than four: the pose and the entry are read once, and each
+// of B's children is mapped into A's frame once for both of A's (on a SIMD software driver
+// such as llvmpipe the texel fetches were about 45 % of this pass, 2026-12-02).
+struct Expansion {
+    a0: Node,
+    a1: Node,
+    b0: Node,
+    b1: Node,
+    // Overlapping child pairs of two leaves: list their triangle pairs (00, 10, 01, 11).
+    leaf: vec4<bool>,
+    // Overlapping child pairs with an internal node: one next-frontier entry each.
+    down: vec4<bool>,
+    // Triangle pairs the leaf pairs list, and next-frontier entries.
+    k: u32,
+    n: u32,
+    // The next-frontier entries' node words: A's children 0 and 1, B's 0 and 1.
+    ea0: u32,
+    ea1: u32,
+    eb0: u32,
+    eb1: u32,
+}
+
+fn expand(entry: vec4<u32>) -> Expansion {
+    var x: Expansion;
+    let one_a = (entry.y & ONE_NODE) != 0u;
+    let one_b = (entry.z & ONE_NODE) != 0u;
+    // Node indices in the frontier are relative to each mesh's first node; a single node has no
+    // second child: its second "child" is itself again, and its pairs are not tested.
+    let ia = entry.y & ~ONE_NODE;
+    let ib = entry.z & ~ONE_NODE;
+    // Only the f32 pose, the bases and the axes' bound (the exact path's words are the
+    // triangle pass's).
+    load_pose(entry.x);
+    load_pose_eps(entry.x);
+    x.a0 = load_node(pose.base.x + ia);
+    x.a1 = load_node(pose.base.x + ia + select(1u, 0u, one_a));
+    x.b0 = load_node(pose.base.z + ib);
+    x.b1 = load_node(pose.base.z + ib + select(1u, 0u, one_b));
+    let mb0 = map_b(x.b0);
+    let mb1 = map_b(x.b1);
+    let o = vec4<bool>(
+        obb_overlap(x.a0, mb0, pose_eps),
+        !one_a && obb_overlap(x.a1, mb0, pose_eps),
+        !one_b && obb_overlap(x.a0, mb1, pose_eps),
+        !one_a && !one_b && obb_overlap(x.a1, mb1, pose_eps));
+    // Overlapping pairs of two leaves list their triangle pairs; the others (at least one
+    // internal node) become one entry of the next frontier, which descends both trees at once
+    // where both are internal (a leaf stays as it is): the pair tree's depth is then the
+    // deeper of the two trees, which bounds the number of levels recorded on the CPU.
+    x.leaf = o & vec4<bool>(x.a0.leaf && x.b0.leaf, x.a1.leaf && x.b0.leaf,
+                            x.a0.leaf && x.b1.leaf, x.a1.leaf && x.b1.leaf);
+    x.down = o & !x.leaf;
+    let sizes = vec4<u32>(x.a0.count * x.b0.count, x.a1.count * x.b0.count,
+                          x.a0.count * x.b1.count, x.a1.count * x.b1.count);
+    let ks = select(vec4<u32>(0u), sizes, x.leaf);
+    x.k = ks.x + ks.y + ks.z + ks.w;
+    let ns = select(vec4<u32>(0u), vec4<u32>(1u), x.down);
+    x.n = ns.x + ns.y + ns.z + ns.w;
+    // A child's entry names its children by the first one, or a leaf itself.
+    x.ea0 = select(x.a0.first_child, ia | ONE_NODE, x.a0.leaf);
+    x.ea1 = select(x.a1.first_child, (ia + 1u) | ONE_NODE, x.a1.leaf);
+    x.eb0 = select(x.b0.first_child, ib | ONE_NODE, x.b0.leaf);
+    x.eb1 = select(x.b1.first_child, (ib + 1u) | ONE_NODE, x.b1.leaf);
+    return x;
 }
 
 @compute @workgroup_size(64)
@@ -726,88 +799,204 @@ fn traverse(@builtin(workgroup_id) wid: vec3<u32>,
         args_after[1] = 1u;
         args_after[2] = 1u;
         if cur > 0u {
-            state.levels += 1u;
+            atomicAdd(&state.levels, 1u);
             // Entries; the CPU counts four child pairs per entry (a single node's missing
             // children included).
-            state.pairs_tested += cur;
+            atomicAdd(&state.pairs_tested, cur);
         }
     }
-    // One invocation per entry: its (up to) four child pairs, child x of A's with child y of
-    // B's. One invocation rather than four: the pose and the entry are read once, and each of
-    // B's children is mapped into A's frame once for both of A's (on a SIMD software driver
-    // such as llvmpipe the texel fetches were about 45 % of this pass, 2026-12-02).
     let idx = (wid.y * grid_x(cur) + wid.x) * WG + lid;
     if idx >= cur {
         return;
     }
     let entry = frontier_in[idx];
-    let one_a = (entry.y & ONE_NODE) != 0u;
-    let one_b = (entry.z & ONE_NODE) != 0u;
-    // Node indices in the frontier are relative to each mesh's first node; a single node has no
-    // second child: its second "child" is itself again, and its pairs are not tested.
-    let ia = entry.y & ~ONE_NODE;
-    let ib = entry.z & ~ONE_NODE;
-    // Only the f32 pose, the bases and the axes' bound (the exact path's words are the
-    // triangle pass's).
-    load_pose(entry.x);
-    load_pose_eps(entry.x);
-    let a0 = load_node(pose.base.x + ia);
-    let a1 = load_node(pose.base.x + ia + select(1u, 0u, one_a));
-    let nb0 = load_node(pose.base.z + ib);
-    let nb1 = load_node(pose.base.z + ib + select(1u, 0u, one_b));
-    let b0 = map_b(nb0);
-    let b1 = map_b(nb1);
-    let o00 = obb_overlap(a0, b0, pose_eps);
-    let o10 = !one_a && obb_overlap(a1, b0, pose_eps);
-    let o01 = !one_b && obb_overlap(a0, b1, pose_eps);
-    let o11 = !one_a && !one_b && obb_overlap(a1, b1, pose_eps);
-    // Overlapping pairs of two leaves list their triangle pairs; the others (at least one
-    // internal node) become one entry of the next frontier, which descends both trees at once
-    // where both are internal (a leaf stays as it is): the pair tree's depth is then the
-    // deeper of the two trees, which bounds the number of levels recorded on the CPU.
-    let l00 = o00 && a0.leaf && nb0.leaf;
-    let l10 = o10 && a1.leaf && nb0.leaf;
-    let l01 = o01 && a0.leaf && nb1.leaf;
-    let l11 = o11 && a1.leaf && nb1.leaf;
-    let d00 = o00 && !l00;
-    let d10 = o10 && !l10;
-    let d01 = o01 && !l01;
-    let d11 = o11 && !l11;
-    let k = select(0u, a0.count * nb0.count, l00) + select(0u, a1.count * nb0.count, l10)
-        + select(0u, a0.count * nb1.count, l01) + select(0u, a1.count * nb1.count, l11);
-    if k > 0u {
-        var w = reserve_tris(k);
-        if l00 { w = write_leaf_pair(entry.x, a0, nb0, w); }
-        if l10 { w = write_leaf_pair(entry.x, a1, nb0, w); }
-        if l01 { w = write_leaf_pair(entry.x, a0, nb1, w); }
-        if l11 { w = write_leaf_pair(entry.x, a1, nb1, w); }
+    let x = expand(entry);
+    if x.k > 0u {
+        var w = reserve_tris(x.k);
+        if x.leaf.x { w = write_leaf_pair(entry.x, x.a0, x.b0, w); }
+        if x.leaf.y { w = write_leaf_pair(entry.x, x.a1, x.b0, w); }
+        if x.leaf.z { w = write_leaf_pair(entry.x, x.a0, x.b1, w); }
+        if x.leaf.w { w = write_leaf_pair(entry.x, x.a1, x.b1, w); }
     }
-    let n = select(0u, 1u, d00) + select(0u, 1u, d10) + select(0u, 1u, d01) + select(0u, 1u, d11);
-    if n == 0u {
+    if x.n == 0u {
         return;
     }
-    // A child's entry names its children by the first one, or a leaf itself.
-    let ea0 = select(a0.first_child, ia | ONE_NODE, a0.leaf);
-    let ea1 = select(a1.first_child, (ia + 1u) | ONE_NODE, a1.leaf);
-    let eb0 = select(nb0.first_child, ib | ONE_NODE, nb0.leaf);
-    let eb1 = select(nb1.first_child, (ib + 1u) | ONE_NODE, nb1.leaf);
-    var w = atomicAdd(&state.counts[level.slots.y], n);
-    append_args(w, n);
+    var w = atomicAdd(&state.counts[level.slots.y], x.n);
+    append_args(w, x.n);
     // Past capacity nothing is written; the CPU sees `needed` above the capacity and re-runs.
     let cap = params.caps.x;
-    if d00 {
-        if w < cap { frontier_out[w] = vec4<u32>(entry.x, ea0, eb0, 0u); }
+    if x.down.x {
+        if w < cap { frontier_out[w] = vec4<u32>(entry.x, x.ea0, x.eb0, 0u); }
         w++;
     }
-    if d10 {
-        if w < cap { frontier_out[w] = vec4<u32>(entry.x, ea1, eb0, 0u); }
+    if x.down.y {
+        if w < cap { frontier_out[w] = vec4<u32>(entry.x, x.ea1, x.eb0, 0u); }
         w++;
     }
-    if d01 {
-        if w < cap { frontier_out[w] = vec4<u32>(entry.x, ea0, eb1, 0u); }
+    if x.down.z {
+        if w < cap { frontier_out[w] = vec4<u32>(entry.x, x.ea0, x.eb1, 0u); }
         w++;
     }
-    if d11 {
-        if w < cap { frontier_out[w] = vec4<u32>(entry.x, ea1, eb1, 0u); }
+    if x.down.w {
+        if w < cap { frontier_out[w] = vec4<u32>(entry.x, x.ea1, x.eb1, 0u); }
+    }
+}
+
+// ---- the one-pass traversal (`traverse_all`) ----
+//
+// The whole batch in one dispatch of `one_pass.x` workgroups, for drivers where a dispatch
+// costs more than the work of a level (a software driver such as llvmpipe: 100-200 µs a level
+// before it does any work, measured 2026-12-02). Workgroup g owns the first level's entries
+// g, g + G, g + 2G, ... (G workgroups; the CPU's front interleaves the body pairs, so each
+// gets a share of every pair) and descends them level by level on its own, the levels
+// separated by workgroup barriers: its frontier is its region of `halves` (two halves of
+// `one_pass.y` entries each, one read and one written per level), its triangle list its region
+// of `tri_list` (caps2.x / G entries), tested after its last level. No workgroup waits for
+// another (WGSL gives no barrier across workgroups, and a driver need not run them at once).
+// Overflow of a region records what the whole buffer would need (the region's demand times G)
+// and stops the workgroup; the CPU re-runs with larger buffers, as for the level chain.
+@group(1) @binding(10) var<storage, read_write> halves: array<vec4<u32>>;
+@group(1) @binding(11) var<storage, read_write> out_all: array<vec4<u32>>;
+
+var<workgroup> wg_next: atomic<u32>;
+var<workgroup> wg_tris: atomic<u32>;
+var<workgroup> wg_count: u32;
+var<workgroup> wg_stopped: u32;
+
+// Reserves `k` entries of this workgroup's triangle list; as `reserve_tris`, the counter
+// stops near 2^31 (each level lists less than 2^31 triangle pairs: `query::level_cap`).
+fn reserve_region_tris(k: u32) -> u32 {
+    let base = atomicAdd(&wg_tris, k);
+    if base + k > 0x80000000u {
+        atomicMin(&wg_tris, 0x80000000u);
+    }
+    return base;
+}
+
+// Writes the triangle pairs of two overlapping leaves to this workgroup's list region (`first`:
+// the region's first entry, `cap`: its size), from entry `w0` of it on; returns the entry after
+// them.
+fn write_region_leaf_pair(p: u32, na: Node, nb: Node, w0: u32, first: u32, cap: u32) -> u32 {
+    var w = w0;
+    for (var i = 0u; i < na.count; i++) {
+        for (var j = 0u; j < nb.count; j++) {
+            if w < cap {
+                tri_list[first + w] = vec4<u32>(p, na.first + i, nb.first + j, 0u);
+            }
+            w++;
+        }
+    }
+    return w;
+}
+
+@compute @workgroup_size(64)
+fn traverse_all(@builtin(workgroup_id) wid: vec3<u32>,
+                @builtin(local_invocation_index) lid: u32) {
+    let g = wid.x;
+    let groups = params.one_pass.x;
+    let region = params.one_pass.y;
+    let roots = params.one_pass.z;
+    let tri_region = params.caps2.x / groups;
+    let tri_first = g * tri_region;
+    if lid == 0u {
+        atomicStore(&wg_next, 0u);
+        atomicStore(&wg_tris, 0u);
+        wg_stopped = 0u;
+    }
+    // The first level: entries g, g + G, ... of the CPU's (`frontier_in`).
+    var cur = select(0u, (roots - g + groups - 1u) / groups, g < roots);
+    var half = 0u;
+    var level = 0u;
+    loop {
+        if cur == 0u || level >= params.one_pass.w {
+            break;
+        }
+        workgroupBarrier();
+        let read_base = half * region * groups + g * region;
+        let write_base = (1u - half) * region * groups + g * region;
+        for (var j = lid; j < cur; j += WG) {
+            var entry: vec4<u32>;
+            if level == 0u {
+                entry = frontier_in[g + j * groups];
+            } else {
+                entry = halves[read_base + j];
+            }
+            let x = expand(entry);
+            if x.k > 0u {
+                var w = reserve_region_tris(x.k);
+                if x.leaf.x { w = write_region_leaf_pair(entry.x, x.a0, x.b0, w, tri_first, tri_region); }
+                if x.leaf.y { w = write_region_leaf_pair(entry.x, x.a1, x.b0, w, tri_first, tri_region); }
+                if x.leaf.z { w = write_region_leaf_pair(entry.x, x.a0, x.b1, w, tri_first, tri_region); }
+                if x.leaf.w { w = write_region_leaf_pair(entry.x, x.a1, x.b1, w, tri_first, tri_region); }
+            }
+            if x.n > 0u {
+                var w = atomicAdd(&wg_next, x.n);
+                // Past the region nothing is written; the level's total below stops the
+                // workgroup and tells the CPU.
+                if x.down.x {
+                    if w < region { halves[write_base + w] = vec4<u32>(entry.x, x.ea0, x.eb0, 0u); }
+                    w++;
+                }
+                if x.down.y {
+                    if w < region { halves[write_base + w] = vec4<u32>(entry.x, x.ea1, x.eb0, 0u); }
+                    w++;
+                }
+                if x.down.z {
+                    if w < region { halves[write_base + w] = vec4<u32>(entry.x, x.ea0, x.eb1, 0u); }
+                    w++;
+                }
+                if x.down.w {
+                    if w < region { halves[write_base + w] = vec4<u32>(entry.x, x.ea1, x.eb1, 0u); }
+                }
+            }
+        }
+        // The level's appends are visible to the whole workgroup after this barrier.
+        storageBarrier();
+        workgroupBarrier();
+        if lid == 0u {
+            let next = atomicLoad(&wg_next);
+            atomicStore(&wg_next, 0u);
+            atomicAdd(&state.pairs_tested, cur);
+            var stop = 0u;
+            if next > region {
+                // What the whole frontier must hold for this workgroup's region to fit.
+                atomicMax(&state.needed, min(next, 0xffffffffu / groups) * groups);
+                stop = 1u;
+            }
+            wg_count = select(next, 0u, stop != 0u);
+            wg_stopped = stop;
+        }
+        cur = workgroupUniformLoad(&wg_count);
+        half = 1u - half;
+        level++;
+    }
+    // This workgroup's level count (the batch reports the most), and entries left if it ran
+    // out of levels (the CPU's depth bound was wrong: an internal error).
+    let stopped = workgroupUniformLoad(&wg_stopped) != 0u;
+    if lid == 0u {
+        atomicMax(&state.levels, level);
+        if !stopped && cur > 0u {
+            atomicAdd(&state.counts[1], cur);
+        }
+        wg_count = atomicLoad(&wg_tris);
+    }
+    // The triangle tests of this workgroup's list; an overflowing list records the whole list's
+    // demand (its own times G) and is not tested.
+    let listed = workgroupUniformLoad(&wg_count);
+    if lid == 0u {
+        let total = select(listed, min(listed, 0xffffffffu / groups) * groups, listed > tri_region);
+        atomicAdd(&state.tris, total);
+    }
+    if listed > tri_region || stopped {
+        return;
+    }
+    for (var j = lid; j < listed; j += WG) {
+        let t = test_listed(tri_list[tri_first + j]);
+        if t.w != 0u {
+            let o = atomicAdd(&state.out, 1u);
+            if o < params.caps.y {
+                out_all[o] = vec4<u32>(t.xyz, 0u);
+            }
+        }
     }
 }

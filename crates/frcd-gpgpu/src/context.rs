@@ -94,6 +94,40 @@ pub enum Recheck {
 /// new contexts: `1` on, `0` off (for measurements through programs that do not call it).
 pub const EXACT_OFFSETS_ENV: &str = "FRCD_GPGPU_EXACT_OFFSETS";
 
+/// Environment variable that overrides the default of [`GpuContext::set_one_pass`] for new
+/// contexts: the workgroups (`0`: the level chain), for measurements through programs that do
+/// not call it.
+pub const ONE_PASS_ENV: &str = "FRCD_GPGPU_ONE_PASS";
+
+/// Most workgroups [`GpuContext::set_one_pass`]'s default gives a software adapter.
+pub const ONE_PASS_SOFTWARE_MAX: u32 = 64;
+
+/// The one-pass traversal's default for a new context, unless [`ONE_PASS_ENV`] says: on a
+/// software adapter one workgroup per thread the driver runs shaders on (lavapipe's
+/// `LP_NUM_THREADS`, by default the host's cores; at most [`ONE_PASS_SOFTWARE_MAX`]), since
+/// such a driver runs each workgroup on one thread; on a hardware adapter the level chain (0).
+/// Measured on a 2-core host with lavapipe (2026-12-02): 2 workgroups 0.90-0.94 of the level
+/// chain's checker frame, 4 about 0.97-1.04, 16 and more slower than the chain.
+fn one_pass_default(info: &wgpu::AdapterInfo) -> u32 {
+    let var = |name: &str| std::env::var(name).ok().and_then(|v| v.parse::<u32>().ok());
+    if let Some(n) = var(ONE_PASS_ENV) {
+        return n;
+    }
+    if info.device_type != wgpu::DeviceType::Cpu {
+        return 0;
+    }
+    // LP_NUM_THREADS=0: lavapipe runs shaders on its queue thread alone.
+    let threads = var("LP_NUM_THREADS")
+        .map(|n| n.max(1))
+        .or_else(|| {
+            std::thread::available_parallelism()
+                .ok()
+                .map(|n| n.get() as u32)
+        })
+        .unwrap_or(1);
+    threads.clamp(1, ONE_PASS_SOFTWARE_MAX)
+}
+
 /// [`GpuContext::set_host_front`]'s default on software adapters: box tests per level the CPU
 /// takes off the GPU at the top of a batch's pair trees.
 pub const HOST_FRONT_SOFTWARE: u32 = 2048;
@@ -121,6 +155,11 @@ pub(crate) struct Pipelines {
     pub triangles: wgpu::ComputePipeline,
     /// The triangle pass with the rotated path only (`EXACT_PATH = false`).
     pub triangles_rotated: wgpu::ComputePipeline,
+    /// traverse.wgsl's one-pass traversal (`traverse_all`: every level and the triangle tests
+    /// in one dispatch), its bindings, and its rotated-path-only form.
+    pub one_pass_bgl: wgpu::BindGroupLayout,
+    pub traverse_all: wgpu::ComputePipeline,
+    pub traverse_all_rotated: wgpu::ComputePipeline,
     pub boxes: wgpu::ComputePipeline,
     pub sweep_bgl: wgpu::BindGroupLayout,
     /// sweep.wgsl's passes: keys, sort_local, sort_global, gather, sweep.
@@ -149,6 +188,9 @@ pub struct GpuContext {
     /// Box tests per level the CPU may take off the GPU at the top of a batch's pair trees
     /// ([`GpuContext::set_host_front`]).
     pub(crate) host_front: u32,
+    /// Workgroups of the one-pass traversal, 0 for the level chain
+    /// ([`GpuContext::set_one_pass`]).
+    pub(crate) one_pass: u32,
     /// Last field: the GPU objects above are dropped under `frcd_gpu::creation_lock` (see the
     /// `Drop` impl).
     _release: frcd_gpu::ReleaseCreationLock,
@@ -307,6 +349,7 @@ impl GpuContext {
     ) -> Result<Self, GpuError> {
         let info = device.adapter_info();
         let exact_offsets = exact_offsets_default(&info);
+        let one_pass = one_pass_default(&info);
         let host_front = if info.device_type == wgpu::DeviceType::Cpu {
             HOST_FRONT_SOFTWARE
         } else {
@@ -359,6 +402,7 @@ impl GpuContext {
             recheck: Recheck::All,
             exact_offsets,
             host_front,
+            one_pass,
             _release: frcd_gpu::ReleaseCreationLock::default(),
         })
     }
@@ -451,6 +495,34 @@ impl GpuContext {
     /// keeps none, and its pairs start at their roots whatever the setting.
     pub fn set_host_front(&mut self, tests: u32) {
         self.host_front = tests;
+    }
+
+    /// Sets how a batch's traversal runs: `0`, one dispatch per level of the pair trees (the
+    /// level chain: every level spread over the whole GPU); `n > 0`, one dispatch of `n`
+    /// workgroups that each descend their share of the batch level by level and test their
+    /// own triangle pairs (`traverse_all` in traverse.wgsl). The answers are the same. One pass
+    /// is for drivers where a dispatch costs more than a level's work: a software driver such
+    /// as lavapipe, where each level cost 100-200 µs before it did any work; on hardware it
+    /// would leave most of the GPU idle. Default: one workgroup per thread of a software
+    /// adapter (see [`ONE_PASS_SOFTWARE_MAX`]), 0 on hardware ones ([`ONE_PASS_ENV`] overrides
+    /// both).
+    ///
+    /// ```no_run
+    /// # fn main() -> Result<(), frcd_gpgpu::GpuError> {
+    /// let mut ctx = frcd_gpgpu::GpuContext::headless()?;
+    /// ctx.set_one_pass(0); // one dispatch per level, as on a hardware adapter
+    /// assert_eq!(ctx.one_pass(), 0);
+    /// # Ok(())
+    /// # }
+    /// ```
+    pub fn set_one_pass(&mut self, workgroups: u32) {
+        self.one_pass = workgroups;
+    }
+
+    /// Workgroups of the one-pass traversal, 0 for the level chain
+    /// ([`GpuContext::set_one_pass`]).
+    pub fn one_pass(&self) -> u32 {
+        self.one_pass
     }
 
     /// The CPU's share of the top of the pair trees ([`GpuContext::set_host_front`]).
@@ -631,6 +703,30 @@ impl Pipelines {
                 },
             ],
         );
+        // The one-pass traversal: the first level's entries, the state, the triangle list, the
+        // params, the pair table, the poses, the two frontier halves and the output.
+        let one_pass_bgl = bgl(
+            "frcd-gpgpu one-pass traversal buffers",
+            &[
+                storage(0, true),
+                storage(2, false),
+                storage(3, false),
+                uniform(4),
+                storage(5, true),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 9,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Uint,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                storage(10, false),
+                storage(11, false),
+            ],
+        );
         let boxes_bgl = bgl(
             "frcd-gpgpu boxes",
             &[
@@ -680,6 +776,10 @@ impl Pipelines {
             })
         };
         let trav_layout = layout("frcd-gpgpu traverse", &[&arena_bgl, &trav_bgl]);
+        let one_pass_layout = layout(
+            "frcd-gpgpu one-pass traversal",
+            &[&arena_bgl, &one_pass_bgl],
+        );
         let boxes_layout = layout("frcd-gpgpu boxes", &[&boxes_bgl]);
         let sweep_layout = layout("frcd-gpgpu sweep", &[&sweep_bgl]);
         let specialized = |label: &str,
@@ -724,6 +824,20 @@ impl Pipelines {
                 "triangles",
                 &[("EXACT_PATH", 0.0)],
             ),
+            traverse_all: pipeline(
+                "frcd-gpgpu one-pass traversal",
+                &one_pass_layout,
+                &traverse_mod,
+                "traverse_all",
+            ),
+            traverse_all_rotated: specialized(
+                "frcd-gpgpu one-pass traversal (rotated path)",
+                &one_pass_layout,
+                &traverse_mod,
+                "traverse_all",
+                &[("EXACT_PATH", 0.0)],
+            ),
+            one_pass_bgl,
             boxes: pipeline("frcd-gpgpu boxes", &boxes_layout, &boxes_mod, "overlap"),
             sweep: ["make_keys", "sort_local", "sort_global", "gather", "sweep"]
                 .map(|entry| pipeline("frcd-gpgpu sweep", &sweep_layout, &sweep_mod, entry)),

@@ -201,6 +201,9 @@ struct Buffers {
     trav_bg: [wgpu::BindGroup; 6],
     /// The triangle pass: triangle list in, output out.
     tri_bg: wgpu::BindGroup,
+    /// The one-pass traversal's bindings (its two frontier halves: one buffer of twice the
+    /// frontier's capacity), made when the context runs it ([`GpuContext::set_one_pass`]).
+    one_pass: Option<(wgpu::Buffer, wgpu::BindGroup)>,
 }
 
 /// Caller-owned GPU buffers of pair queries (frontiers, output, pair table, staging), sized by
@@ -263,6 +266,7 @@ impl QueryScratch {
                 && b.tri_cap == self.tri_cap
                 && b.pair_cap == self.pair_cap
                 && b.timers.is_some() == ctx.pass_timers
+                && b.one_pass.is_some() == (ctx.one_pass > 0)
             {
                 return Ok(());
             }
@@ -271,10 +275,13 @@ impl QueryScratch {
         // the capacities stop at what one dispatch can cover, which keeps every indirect
         // argument within the device's limits (the context skips wgpu's validation of them);
         // `run` refuses a batch that needs more.
-        let most = dispatchable(ctx);
-        // A level runs one invocation per frontier entry.
-        self.frontier_cap = self.frontier_cap.min(most);
-        self.tri_cap = self.tri_cap.min(most);
+        // (The one-pass traversal dispatches a fixed number of workgroups: no such bound.)
+        if ctx.one_pass == 0 {
+            let most = dispatchable(ctx);
+            // A level runs one invocation per frontier entry.
+            self.frontier_cap = self.frontier_cap.min(most);
+            self.tri_cap = self.tri_cap.min(most);
+        }
         let fsize = self.frontier_cap as u64 * ENTRY_BYTES;
         let osize = self.output_cap as u64 * ENTRY_BYTES;
         let tsize = self.tri_cap as u64 * ENTRY_BYTES;
@@ -284,6 +291,10 @@ impl QueryScratch {
             ("output", osize),
             ("triangle list", tsize),
             ("pair table", psize),
+            (
+                "one-pass frontier halves",
+                if ctx.one_pass > 0 { 2 * fsize } else { 0 },
+            ),
         ])?;
         use wgpu::BufferUsages as B;
         let d = &ctx.device;
@@ -385,6 +396,27 @@ impl QueryScratch {
         // The triangle pass reads the list and writes the output, dispatched with `args[0]`;
         // its bindings 3 and 6-8 are unused (buffers other than `args[0]` fill the layout).
         let tri_bg = trav(&tris, &out, &frontier[0], 0);
+        let one_pass = (ctx.one_pass > 0).then(|| {
+            let halves = buf("frcd-gpgpu one-pass frontier halves", 2 * fsize, B::STORAGE);
+            let bg = d.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("frcd-gpgpu one-pass traversal"),
+                layout: &ctx.pipes.one_pass_bgl,
+                entries: &[
+                    crate::context::entry(0, &frontier[0]),
+                    crate::context::entry(2, &state),
+                    crate::context::entry(3, &tris),
+                    crate::context::entry(4, &params),
+                    crate::context::entry(5, &pairs),
+                    wgpu::BindGroupEntry {
+                        binding: 9,
+                        resource: wgpu::BindingResource::TextureView(&poses_view),
+                    },
+                    crate::context::entry(10, &halves),
+                    crate::context::entry(11, &out),
+                ],
+            });
+            (halves, bg)
+        });
         self.bufs = Some(Buffers {
             ctx_id: ctx.id,
             frontier_cap: self.frontier_cap,
@@ -403,6 +435,7 @@ impl QueryScratch {
             out_offset,
             trav_bg,
             tri_bg,
+            one_pass,
         });
         Ok(())
     }
@@ -451,6 +484,8 @@ struct Prepared {
     exact: bool,
     /// The first level's entries (the roots, or the CPU's front: `front.rs`).
     roots: Vec<[u32; 4]>,
+    /// Workgroups of the one-pass traversal, 0 for the level chain ([`GpuContext::set_one_pass`]).
+    one_pass: u32,
     /// Box tests the CPU made descending the front, and the time it took.
     host_tests: u64,
     host_steps: u32,
@@ -660,7 +695,8 @@ fn pose_texels(info: &PairInfo, eps: f32) -> [[u32; 4]; 5] {
 
 /// Timestamps a batch writes with pass timers on (0: too deep to time).
 fn timer_count(p: &Prepared) -> u32 {
-    let n = p.levels + 2;
+    // The one-pass traversal: before and after its dispatch.
+    let n = if p.one_pass > 0 { 2 } else { p.levels + 2 };
     if n <= MAX_TIMERS { n } else { 0 }
 }
 
@@ -934,6 +970,7 @@ impl GpuContext {
             leaf_pairs: 0,
             exact: self.exact_offsets,
             roots: Vec::new(),
+            one_pass: self.one_pass,
             host_tests: 0,
             host_steps: 0,
             host_time: std::time::Duration::ZERO,
@@ -1005,6 +1042,14 @@ impl GpuContext {
             bytemuck::bytes_of(&Params {
                 caps: [level_cap, bufs.output_cap, max_groups, n],
                 caps2: [bufs.tri_cap, 0, 0, 0],
+                // Each workgroup's frontier region (in each half) and triangle list region are
+                // its share of the capacities.
+                one_pass: [
+                    p.one_pass,
+                    level_cap / p.one_pass.max(1),
+                    n_roots.min(level_cap),
+                    p.levels,
+                ],
             }),
         );
         if n == 0 {
@@ -1052,6 +1097,50 @@ impl GpuContext {
             .bind
             .clone();
         let timers = bufs.timers.as_ref().filter(|_| timer_count(p) > 0);
+        if let (true, Some((_, one_pass_bg))) = (p.one_pass > 0, &bufs.one_pass) {
+            // Every level and the triangle tests in one dispatch of `p.one_pass` workgroups.
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("frcd-gpgpu one-pass traversal"),
+                timestamp_writes: None,
+            });
+            if let Some((set, _)) = timers {
+                pass.write_timestamp(set, 0);
+            }
+            pass.set_pipeline(if p.exact {
+                &self.pipes.traverse_all
+            } else {
+                &self.pipes.traverse_all_rotated
+            });
+            pass.set_bind_group(0, &arena_bg, &[]);
+            pass.set_bind_group(1, one_pass_bg, &[]);
+            pass.dispatch_workgroups(p.one_pass, 1, 1);
+            if let Some((set, _)) = timers {
+                pass.write_timestamp(set, 1);
+            }
+        } else {
+            self.record_level_chain(enc, p, bufs, &arena_bg, timers);
+        }
+        enc.copy_buffer_to_buffer(&bufs.state, 0, &bufs.staging, 0, STATE_BYTES);
+        if let Some((set, resolved)) = timers {
+            let n = timer_count(p);
+            enc.resolve_query_set(set, 0..n, resolved, 0);
+            enc.copy_buffer_to_buffer(resolved, 0, &bufs.staging, STATE_BYTES, n as u64 * 8);
+        }
+        let out_bytes = bufs.output_cap as u64 * ENTRY_BYTES;
+        enc.copy_buffer_to_buffer(&bufs.out, 0, &bufs.staging, bufs.out_offset, out_bytes);
+        Ok(())
+    }
+
+    /// Records the level chain: one dispatch per level of the pair trees, then the triangle
+    /// pass.
+    fn record_level_chain(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        p: &Prepared,
+        bufs: &Buffers,
+        arena_bg: &wgpu::BindGroup,
+        timers: Option<&(wgpu::QuerySet, wgpu::Buffer)>,
+    ) {
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("frcd-gpgpu traversal"),
@@ -1067,7 +1156,7 @@ impl GpuContext {
             // it wrote (the CPU's for level 0): one dispatch per level, no control pass
             // (each such single-invocation pass cost 20-70 µs on lavapipe).
             pass.set_pipeline(&self.pipes.traverse);
-            pass.set_bind_group(0, &arena_bg, &[]);
+            pass.set_bind_group(0, arena_bg, &[]);
             for level in 0..p.levels as usize {
                 pass.set_bind_group(1, &bufs.trav_bg[level % 6], &[]);
                 pass.dispatch_workgroups_indirect(&bufs.args[level % 3], 0);
@@ -1090,22 +1179,13 @@ impl GpuContext {
             } else {
                 &self.pipes.triangles_rotated
             });
-            pass.set_bind_group(0, &arena_bg, &[]);
+            pass.set_bind_group(0, arena_bg, &[]);
             pass.set_bind_group(1, &bufs.tri_bg, &[]);
             pass.dispatch_workgroups_indirect(&bufs.args[0], 0);
             if let Some((set, _)) = timers {
                 pass.write_timestamp(set, p.levels + 1);
             }
         }
-        enc.copy_buffer_to_buffer(&bufs.state, 0, &bufs.staging, 0, STATE_BYTES);
-        if let Some((set, resolved)) = timers {
-            let n = timer_count(p);
-            enc.resolve_query_set(set, 0..n, resolved, 0);
-            enc.copy_buffer_to_buffer(resolved, 0, &bufs.staging, STATE_BYTES, n as u64 * 8);
-        }
-        let out_bytes = bufs.output_cap as u64 * ENTRY_BYTES;
-        enc.copy_buffer_to_buffer(&bufs.out, 0, &bufs.staging, bufs.out_offset, out_bytes);
-        Ok(())
     }
 
     /// Reads back (after `first`, the caller's submission, when given; else records and
@@ -1158,11 +1238,22 @@ impl GpuContext {
                 })?;
             answer.timings.wait += waited.elapsed();
             answer.readbacks += 1;
-            // What the last level appended (nothing when the traversal finished).
-            let cur = state.counts[p.levels as usize % 3];
+            // What the last level appended (nothing when the traversal finished; the one-pass
+            // traversal adds what a workgroup left after the most levels to `counts[1]`).
+            let cur = if p.one_pass > 0 {
+                state.counts[1]
+            } else {
+                state.counts[p.levels as usize % 3]
+            };
             let (out_count, needed) = (state.out, state.needed);
             let mut rerun = false;
-            let most = dispatchable(self);
+            // The level chain's dispatches cover at most `most` entries (the one-pass
+            // traversal's workgroups loop over theirs).
+            let most = if p.one_pass == 0 {
+                dispatchable(self)
+            } else {
+                u32::MAX
+            };
             for (what, count, limit) in [
                 (
                     "node pairs one level lists (workgroups per dimension squared × 64)",
@@ -1237,7 +1328,9 @@ impl GpuContext {
             let last = ticks.len() - 1;
             answer.timings.gpu_levels =
                 ticks[..last].windows(2).map(|w| span(w[0], w[1])).collect();
-            answer.timings.gpu_triangles = Some(span(ticks[last - 1], ticks[last]));
+            // The one-pass traversal's triangle tests are inside its one dispatch.
+            answer.timings.gpu_triangles =
+                (p.one_pass == 0).then(|| span(ticks[last - 1], ticks[last]));
             answer.timings.gpu_total = Some(span(ticks[0], ticks[last]));
         }
         let deciding = std::time::Instant::now();
@@ -1306,6 +1399,7 @@ mod tests {
             leaf_pairs: 0,
             exact: false,
             roots: Vec::new(),
+            one_pass: 0,
             host_tests: 0,
             host_steps: 0,
             host_time: std::time::Duration::ZERO,
@@ -1419,6 +1513,7 @@ mod tests {
             leaf_pairs: 0,
             exact: false,
             roots: Vec::new(),
+            one_pass: 0,
             host_tests: 0,
             host_steps: 0,
             host_time: std::time::Duration::ZERO,

@@ -756,9 +756,12 @@ fn pass_timers_time_every_level_and_leave_the_answer_alone() {
         Ok(c) => c,
         Err(e) => panic!("a context that could be made without timers fails with them: {e}"),
     };
-    // Every level of the trees on the GPU (no CPU front), so there is one time per level.
+    // Every level of the trees on the GPU (no CPU front) in the level chain (one dispatch per
+    // level), so there is one time per level.
     plain.set_host_front(0);
     timed.set_host_front(0);
+    plain.set_one_pass(0);
+    timed.set_one_pass(0);
     let a = shapes::icosphere(1.0, 3);
     let b = shapes::torus(0.8, 0.25, 48, 16).expect("torus");
     let pose_b = Pose::new(DVec3::new(0.7, 0.1, 0.0), DQuat::from_rotation_x(0.7));
@@ -802,6 +805,99 @@ fn pass_timers_time_every_level_and_leave_the_answer_alone() {
         assert!(parts <= total, "{t:?}");
         // Not `total <= wait`: a driver may run the work inside `submit` (lavapipe once did).
         assert!(total > std::time::Duration::ZERO, "{t:?}");
+    }
+    // The one-pass traversal: one dispatch, timed as a whole.
+    timed.set_one_pass(2);
+    let (got, _) = run(&timed, &mut QueryScratch::default());
+    assert_eq!(got.results[0].pairs, want);
+    let t = &got.timings;
+    assert!(
+        t.gpu_levels.is_empty() && t.gpu_triangles.is_none(),
+        "{t:?}"
+    );
+    assert!(
+        t.gpu_total.is_some_and(|d| d > std::time::Duration::ZERO),
+        "{t:?}"
+    );
+}
+
+/// The one-pass traversal (`GpuContext::set_one_pass`): for any number of workgroups, with and
+/// without the CPU's front, and through overflow re-runs of its per-workgroup regions, a frame of
+/// many body pairs equals the oracle pair for pair, and it tests exactly the node pairs and
+/// runs exactly the levels the level chain does (the same traversal, only dispatched
+/// differently: a workgroup that skipped or repeated an entry would show here).
+#[test]
+fn the_one_pass_traversal_equals_the_oracle_and_the_level_chain() {
+    let Some(mut ctx) = new_context() else { return };
+    let meshes = [
+        shapes::icosphere(1.0, 3),
+        shapes::torus(0.8, 0.25, 48, 16).expect("torus"),
+        shapes::cuboid(DVec3::new(0.9, 0.4, 0.2)),
+    ];
+    let bodies: Vec<Body> = meshes.iter().map(|m| body(&ctx, m.clone())).collect();
+    let mut rng = StdRng::seed_from_u64(1234);
+    let poses: Vec<Pose> = (0..30)
+        .map(|_| {
+            let axis = random_axis(&mut rng);
+            Pose::new(
+                DVec3::new(
+                    rng.random_range(-1.2..1.2),
+                    rng.random_range(-1.2..1.2),
+                    rng.random_range(-0.4..0.4),
+                ),
+                DQuat::from_axis_angle(axis, rng.random_range(0.0..6.0)),
+            )
+        })
+        .collect();
+    let items: Vec<(usize, usize, usize, usize)> = (0..45)
+        .map(|k| (k % 3, (k * 7) % 30, (k / 3) % 3, (k * 11 + 5) % 30))
+        .collect();
+    let want: Vec<_> = items
+        .iter()
+        .map(|&(a, pa, b, pb)| {
+            oracle::pairs(&bodies[a].mesh, &poses[pa], &bodies[b].mesh, &poses[pb])
+        })
+        .collect();
+    let touching = want.iter().filter(|w| !w.is_empty()).count();
+    assert!(touching > 5 && touching < items.len(), "{touching}");
+    let batch: Vec<_> = items
+        .iter()
+        .map(|&(a, pa, b, pb)| (&bodies[a].gpu, &poses[pa], &bodies[b].gpu, &poses[pb]))
+        .collect();
+    for front in [0, 256, frcd_gpgpu::HOST_FRONT_SOFTWARE] {
+        ctx.set_host_front(front);
+        ctx.set_one_pass(0);
+        let chain = ctx
+            .collide_batch(&batch, &mut QueryScratch::default())
+            .expect("level chain");
+        for (k, (r, w)) in chain.results.iter().zip(&want).enumerate() {
+            assert_eq!(&r.pairs, w, "level chain, front {front}, pair {k}");
+        }
+        for groups in [1, 2, 3, 7, 64] {
+            ctx.set_one_pass(groups);
+            // Default buffers, then buffers far too small for any workgroup's region.
+            for (name, mut scratch) in [
+                ("default", QueryScratch::default()),
+                ("tiny", QueryScratch::with_capacity(3, 2)),
+            ] {
+                let got = ctx
+                    .collide_batch(&batch, &mut scratch)
+                    .unwrap_or_else(|e| panic!("{groups} workgroups, front {front}: {e}"));
+                let at = format!("{groups} workgroups, front {front}, {name} scratch");
+                for (k, (r, w)) in got.results.iter().zip(&want).enumerate() {
+                    assert_eq!(&r.pairs, w, "{at}, pair {k}");
+                }
+                assert_eq!(
+                    (got.node_pairs_tested, got.levels, got.host_levels),
+                    (chain.node_pairs_tested, chain.levels, chain.host_levels),
+                    "{at}"
+                );
+                if name == "tiny" {
+                    assert!(got.reruns > 0, "{at}: no overflow");
+                }
+                assert_eq!(got.submissions, 1 + got.reruns, "{at}");
+            }
+        }
     }
 }
 
@@ -1147,8 +1243,10 @@ fn two_dimensional_grids_without_indirect_validation() {
         return;
     };
     let mut ctx = GpuContext::from_adapter(&adapter, device, queue).expect("limits suffice");
-    // Levels of more than one row need the GPU to start at the roots (no CPU front).
+    // Levels of more than one row need the GPU to start at the roots (no CPU front), one
+    // dispatch per level (the one-pass traversal has no grid to lay out).
     ctx.set_host_front(0);
+    ctx.set_one_pass(0);
     let a = body(&ctx, shapes::icosphere(1.0, 3));
     let poses: Vec<(Pose, Pose)> = (0..6)
         .map(|k| {

@@ -17,9 +17,10 @@ struct State {
     // The batch's root pairs, or the largest frontier size requested if that exceeds the
     // frontier's capacity (overflow: the CPU re-runs with a frontier this large).
     needed: atomic<u32>,
-    // Levels that had work, and node pairs tested in total.
-    levels: u32,
-    pairs_tested: u32,
+    // Levels that had work (the one-pass traversal: the most of any workgroup), and frontier
+    // entries expanded in total.
+    levels: atomic<u32>,
+    pairs_tested: atomic<u32>,
     // Triangle pairs appended to the triangle list (may exceed the capacity: overflow).
     tris: atomic<u32>,
     // The triangle pass's indirect arguments (x, y, z), raised by the traversal's
@@ -39,6 +40,9 @@ struct Params {
     caps: vec4<u32>,
     // triangle list capacity, unused, unused, unused
     caps2: vec4<u32>,
+    // The one-pass traversal (`traverse_all`): workgroups, frontier entries per workgroup
+    // (each of its two halves), the batch's first-level entries, most levels.
+    one_pass: vec4<u32>,
 }
 
 // Shape of the mesh arena textures.

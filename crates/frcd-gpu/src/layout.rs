@@ -45,6 +45,9 @@ pub struct Params {
     pub caps: [u32; 4],
     /// Triangle list capacity, then unused.
     pub caps2: [u32; 4],
+    /// The one-pass traversal: workgroups, frontier entries per workgroup (in each of its two
+    /// halves), the first level's entries, most levels.
+    pub one_pass: [u32; 4],
 }
 
 /// `Arena`: shape of frcd-gpgpu's mesh arena textures.
@@ -181,7 +184,8 @@ pub fn mirrors() -> Vec<MirrorLayout> {
         m!(Level { slots: [u32; 4] }),
         m!(Params {
             caps: [u32; 4],
-            caps2: [u32; 4]
+            caps2: [u32; 4],
+            one_pass: [u32; 4]
         }),
         m!(Arena {
             node_layout: [u32; 4],

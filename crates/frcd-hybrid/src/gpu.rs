@@ -190,6 +190,9 @@ impl Checker {
         if let Some(tests) = self.options.gpu_host_front {
             ctx.set_host_front(tests);
         }
+        if let Some(workgroups) = self.options.gpu_one_pass {
+            ctx.set_one_pass(workgroups);
+        }
         if !self.options.gpu_recheck_certified {
             ctx.set_recheck(frcd_gpgpu::Recheck::Uncertain);
         }

@@ -109,6 +109,12 @@ pub struct Options {
     /// the answers are the same. `None`: the context's default (2,048 on a software adapter
     /// such as lavapipe, 0 on a hardware one); `Some(0)`: the GPU starts at the roots.
     pub gpu_host_front: Option<u32>,
+    /// How the GPU pair batch traverses (frcd-gpgpu's `GpuContext::set_one_pass`, feature
+    /// `gpgpu`): `Some(0)`, one dispatch per level of the pair trees; `Some(n)`, every level
+    /// and the triangle tests in one dispatch of `n` workgroups; `None`: the context's default
+    /// (one pass on a software adapter such as lavapipe, where each dispatch costs more than a
+    /// level's work; the level chain on a hardware one). The answers are the same.
+    pub gpu_one_pass: Option<u32>,
     /// Re-decide on the CPU, with the exact test, every triangle pair the GPU pair traversal
     /// reports (default true; frcd-gpgpu's `Recheck::All`, feature `gpgpu`), or only those it
     /// left uncertain (false: `Recheck::Uncertain`). The GPU's *touching* verdicts are
@@ -154,6 +160,7 @@ impl Default for Options {
             },
             gpu_build: Some(BuildOptions::default()),
             gpu_host_front: None,
+            gpu_one_pass: None,
             gpu_recheck_certified: true,
             clearance_build: Some(BuildOptions {
                 max_leaf_triangles: 1,
