@@ -10,7 +10,9 @@
 // orientation form) once per listed pair, one pair per invocation (the tests of a leaf pair no
 // longer run as a loop in the few lanes that reached a leaf: a SIMD driver such as llvmpipe
 // then kept the other lanes of the vector idle), and appends the touching pairs to the output,
-// flagged "uncertain" when a sign it needs is within the bound of zero.
+// flagged "uncertain" when a sign it needs is within the bound of zero. `traverse_all` runs the
+// same levels and triangle tests in one dispatch of a few workgroups (see "the one-pass
+// traversal" below), for software drivers.
 //
 // Everything is computed in A's local frame: B's geometry is mapped by the pair's relative pose
 // (R, t). Every mesh of a context lives in one pair of arena textures (nodes rgba32uint, the

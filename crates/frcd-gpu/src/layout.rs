@@ -17,9 +17,9 @@ pub struct State {
     /// The batch's root pairs, or the largest frontier size requested where that exceeded
     /// the frontier's capacity (overflow).
     pub needed: u32,
-    /// Levels that had work.
+    /// Levels that had work (the one-pass traversal: the most any of its workgroups ran).
     pub levels: u32,
-    /// Node pairs tested.
+    /// Frontier entries expanded (each tests up to four child pairs).
     pub pairs_tested: u32,
     /// Triangle pairs appended to the triangle list (may exceed its capacity: overflow).
     pub tris: u32,

@@ -343,6 +343,19 @@ fn exact_gpgpu_and_gpu_heavy_hybrid_equal_oracle() {
         .expect("gpgpu backend");
         assert_eq!(want, got, "CPU front of {front} box tests per level");
     }
+    // The level chain (one dispatch per level, the default on hardware) and the one-pass
+    // traversal in several workgroups (the default on software adapters): the same answers.
+    for workgroups in [0, 1, 3] {
+        let (want, got, _) = run(
+            &s,
+            Options {
+                gpu_one_pass: Some(workgroups),
+                ..forced.clone()
+            },
+        )
+        .expect("gpgpu backend");
+        assert_eq!(want, got, "one pass of {workgroups} workgroups");
+    }
     // Only the pairs the GPU left uncertain re-decided on the CPU: the same answers.
     let (want, got, _) = run(
         &s,
