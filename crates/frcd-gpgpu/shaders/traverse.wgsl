@@ -98,7 +98,8 @@ override EXACT_PATH: bool = true;
 @group(1) @binding(8) var<uniform> level: Level;
 // Both passes: each pair's f32 pose and arena bases as five rgba32uint texels, pair p at texels
 // 5 (p mod 256) + k of row p / 256: (R row 0, t.x) (R row 1, t.y) (R row 2, t.z) as f32 bits,
-// `PairInfo.base`, then (eps_A + eps_B, 0, 0, 0), the meshes' axes' bound (`obb_overlap`).
+// `PairInfo.base`, then (eps_A + eps_B, fix.x, fix.y, fix.z): the meshes' axes' bound
+// (`obb_overlap`) and the triangle pass's path and grid exponents (`PairInfo.fix`).
 // The pose words are those of `pairs[p]` (r0-r2, t, base); read as texels because a
 // software driver such as llvmpipe fetches a texel for its whole vector of invocations at once,
 // where a storage-buffer load of an index that varies across lanes becomes a loop over the
@@ -166,8 +167,9 @@ fn load_node(i: u32) -> Node {
     return n;
 }
 
-// Fills `pose`'s f32 pose and bases for pair p from `poses` (the exact path's words are read
-// from `pairs` by the triangle pass; the axes' bound by `load_pose_eps`). A bit cast is exact;
+// Fills `pose`'s f32 pose and bases for pair p from `poses` (the triangle pass reads `fix` from
+// the fifth texel and the exact path's limbs from `pairs`; the axes' bound is
+// `load_pose_eps`'s). A bit cast is exact;
 // a subnormal word a driver flushes when it computes with it is inside the TAU terms of every
 // bound.
 fn load_pose(p: u32) {
@@ -678,10 +680,12 @@ fn append_args(base: u32, k: u32) {
 // The triangle test of one listed pair: (pair, triangle of A, triangle of B | UNCERTAIN_FLAG,
 // 1 unless certainly disjoint), as input-mesh indices.
 fn test_listed(entry: vec4<u32>) -> vec4<u32> {
-    // The pose from its texels; the exact path's words from the pair table (its limbs are read
-    // by `exact_w`).
+    // The pose from its texels, the path and grid exponents (`PairInfo.fix`) from the fifth
+    // (a texel, not the pair table: see `poses`); the exact path's limbs are read from the pair
+    // table by `exact_w`.
     load_pose(entry.x);
-    pose.fix = pairs[entry.x].fix;
+    let w4 = textureLoad(poses, vec2<u32>((entry.x & 255u) * 5u + 4u, entry.x >> 8u), 0);
+    pose.fix = bitcast<vec4<i32>>(vec4<u32>(w4.yzw, 0u));
     let lay = arena.tri_layout;
     let sa = slot(lay, 3u, pose.base.y + entry.y);
     let sb = slot(lay, 3u, pose.base.w + entry.z);
@@ -857,6 +861,11 @@ fn traverse(@builtin(workgroup_id) wid: vec3<u32>,
 // another (WGSL gives no barrier across workgroups, and a driver need not run them at once).
 // Overflow of a region records what the whole buffer would need (the region's demand times G)
 // and stops the workgroup; the CPU re-runs with larger buffers, as for the level chain.
+// llvmpipe silently ends an invocation's loops once they have run 65,535 iterations in all, so
+// each workgroup counts a bound on its invocations' iterations before each level and before
+// its triangle tests (caps2.z per frontier entry: the entry's own iteration and up to four leaf
+// pairs' listing loops; one per triangle pair; both per WG entries), and stops short of the
+// budget caps2.y, flagging `counts[2]`: the CPU then re-runs the batch as the level chain.
 @group(1) @binding(10) var<storage, read_write> halves: array<vec4<u32>>;
 @group(1) @binding(11) var<storage, read_write> out_all: array<vec4<u32>>;
 
@@ -909,10 +918,25 @@ fn traverse_all(@builtin(workgroup_id) wid: vec3<u32>,
     var cur = select(0u, (roots - g + groups - 1u) / groups, g < roots);
     var half = 0u;
     var level = 0u;
+    // Loop iterations spent (a bound, the same in every invocation), and whether the budget
+    // stopped the workgroup.
+    let budget = params.caps2.y;
+    let per_entry = max(params.caps2.z, 1u);
+    var spent = 0u;
+    var over = false;
     loop {
         if cur == 0u || level >= params.one_pass.w {
             break;
         }
+        // This level: its own iteration of the level loop, and its entries' (per_entry each,
+        // one WG-wide round of entries at a time).
+        let rounds = (cur + WG - 1u) / WG;
+        let left = budget - min(spent, budget);
+        if left == 0u || rounds > (left - 1u) / per_entry {
+            over = true;
+            break;
+        }
+        spent += rounds * per_entry + 1u;
         workgroupBarrier();
         let read_base = half * region * groups + g * region;
         let write_base = (1u - half) * region * groups + g * region;
@@ -977,7 +1001,9 @@ fn traverse_all(@builtin(workgroup_id) wid: vec3<u32>,
     let stopped = workgroupUniformLoad(&wg_stopped) != 0u;
     if lid == 0u {
         atomicMax(&state.levels, level);
-        if !stopped && cur > 0u {
+        if over {
+            atomicMax(&state.counts[2], 1u);
+        } else if !stopped && cur > 0u {
             atomicAdd(&state.counts[1], cur);
         }
         wg_count = atomicLoad(&wg_tris);
@@ -989,7 +1015,13 @@ fn traverse_all(@builtin(workgroup_id) wid: vec3<u32>,
         let total = select(listed, min(listed, 0xffffffffu / groups) * groups, listed > tri_region);
         atomicAdd(&state.tris, total);
     }
-    if listed > tri_region || stopped {
+    if listed > tri_region || stopped || over {
+        return;
+    }
+    if (listed + WG - 1u) / WG > budget - min(spent, budget) {
+        if lid == 0u {
+            atomicMax(&state.counts[2], 1u);
+        }
         return;
     }
     for (var j = lid; j < listed; j += WG) {

@@ -99,6 +99,14 @@ pub const EXACT_OFFSETS_ENV: &str = "FRCD_GPGPU_EXACT_OFFSETS";
 /// not call it.
 pub const ONE_PASS_ENV: &str = "FRCD_GPGPU_ONE_PASS";
 
+/// Loop iterations one invocation of the one-pass traversal may run before its workgroup stops
+/// and the batch re-runs as the level chain. llvmpipe silently ends a shader invocation's
+/// loops once they have run 65,535 iterations in all (Mesa's `LP_MAX_TGSI_LOOP_ITERATIONS`):
+/// a workgroup whose share of a large batch needs more would lose pairs there. The shader
+/// counts a bound on its iterations (each level's loop over its entries, the leaf pairs'
+/// listing loops, the triangle tests' loop) before it runs them and stops short of this.
+pub const ONE_PASS_LOOP_BUDGET: u32 = 49_152;
+
 /// Most workgroups [`GpuContext::set_one_pass`]'s default gives a software adapter.
 pub const ONE_PASS_SOFTWARE_MAX: u32 = 64;
 
@@ -191,6 +199,8 @@ pub struct GpuContext {
     /// Workgroups of the one-pass traversal, 0 for the level chain
     /// ([`GpuContext::set_one_pass`]).
     pub(crate) one_pass: u32,
+    /// The one-pass traversal's loop budget per invocation ([`ONE_PASS_LOOP_BUDGET`]).
+    pub(crate) one_pass_budget: u32,
     /// Last field: the GPU objects above are dropped under `frcd_gpu::creation_lock` (see the
     /// `Drop` impl).
     _release: frcd_gpu::ReleaseCreationLock,
@@ -403,6 +413,7 @@ impl GpuContext {
             exact_offsets,
             host_front,
             one_pass,
+            one_pass_budget: ONE_PASS_LOOP_BUDGET,
             _release: frcd_gpu::ReleaseCreationLock::default(),
         })
     }
@@ -523,6 +534,14 @@ impl GpuContext {
     /// ([`GpuContext::set_one_pass`]).
     pub fn one_pass(&self) -> u32 {
         self.one_pass
+    }
+
+    /// Sets the one-pass traversal's loop budget per invocation (default
+    /// [`ONE_PASS_LOOP_BUDGET`]; at most that is safe on llvmpipe). For tests of the fallback
+    /// to the level chain.
+    #[doc(hidden)]
+    pub fn set_one_pass_loop_budget(&mut self, iterations: u32) {
+        self.one_pass_budget = iterations;
     }
 
     /// The CPU's share of the top of the pair trees ([`GpuContext::set_host_front`]).

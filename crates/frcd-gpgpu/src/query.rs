@@ -484,12 +484,21 @@ struct Prepared {
     exact: bool,
     /// The first level's entries (the roots, or the CPU's front: `front.rs`).
     roots: Vec<[u32; 4]>,
-    /// Workgroups of the one-pass traversal, 0 for the level chain ([`GpuContext::set_one_pass`]).
-    one_pass: u32,
+    /// Workgroups of the one-pass traversal, 0 for the level chain ([`GpuContext::set_one_pass`]);
+    /// set to 0 when a one-pass run ran out of its loop budget (`ONE_PASS_LOOP_BUDGET`), so the
+    /// re-run takes the level chain.
+    one_pass: std::sync::atomic::AtomicU32,
     /// Box tests the CPU made descending the front, and the time it took.
     host_tests: u64,
     host_steps: u32,
     host_time: std::time::Duration,
+}
+
+impl Prepared {
+    /// Workgroups of the one-pass traversal for the next run, 0 for the level chain.
+    fn one_pass(&self) -> u32 {
+        self.one_pass.load(std::sync::atomic::Ordering::Relaxed)
+    }
 }
 
 /// Reported pairs below which the re-decision stays on the calling thread. Measured on an H200's
@@ -681,7 +690,8 @@ fn write_poses(queue: &wgpu::Queue, poses: &wgpu::Texture, infos: &[PairInfo], e
 
 /// One pair's five pose texels (`traverse.wgsl`'s `load_pose`): rows of R with t's
 /// coordinates in w, as f32 bits, the arena bases, then the bound on both meshes' axes'
-/// deviation from orthonormal (`eps_A + eps_B`, rounded up).
+/// deviation from orthonormal (`eps_A + eps_B`, rounded up) and `PairInfo::fix`'s first three
+/// words (the triangle pass's path and grid exponents).
 fn pose_texels(info: &PairInfo, eps: f32) -> [[u32; 4]; 5] {
     let row = |r: &[f32; 4], t: f32| [r[0].to_bits(), r[1].to_bits(), r[2].to_bits(), t.to_bits()];
     [
@@ -689,14 +699,19 @@ fn pose_texels(info: &PairInfo, eps: f32) -> [[u32; 4]; 5] {
         row(&info.r1, info.t[1]),
         row(&info.r2, info.t[2]),
         info.base,
-        [eps.to_bits(), 0, 0, 0],
+        [
+            eps.to_bits(),
+            info.fix[0] as u32,
+            info.fix[1] as u32,
+            info.fix[2] as u32,
+        ],
     ]
 }
 
 /// Timestamps a batch writes with pass timers on (0: too deep to time).
 fn timer_count(p: &Prepared) -> u32 {
     // The one-pass traversal: before and after its dispatch.
-    let n = if p.one_pass > 0 { 2 } else { p.levels + 2 };
+    let n = if p.one_pass() > 0 { 2 } else { p.levels + 2 };
     if n <= MAX_TIMERS { n } else { 0 }
 }
 
@@ -970,7 +985,7 @@ impl GpuContext {
             leaf_pairs: 0,
             exact: self.exact_offsets,
             roots: Vec::new(),
-            one_pass: self.one_pass,
+            one_pass: self.one_pass.into(),
             host_tests: 0,
             host_steps: 0,
             host_time: std::time::Duration::ZERO,
@@ -1041,12 +1056,20 @@ impl GpuContext {
             0,
             bytemuck::bytes_of(&Params {
                 caps: [level_cap, bufs.output_cap, max_groups, n],
-                caps2: [bufs.tri_cap, 0, 0, 0],
+                // The one-pass traversal's loop budget, and what one frontier entry's loops
+                // take at most: its iteration of the level's loop, and listing up to four leaf
+                // pairs (na (1 + nb) <= 2 na nb iterations each).
+                caps2: [
+                    bufs.tri_cap,
+                    self.one_pass_budget,
+                    (1 + 8 * p.leaf_pairs).min(u32::MAX as u64) as u32,
+                    0,
+                ],
                 // Each workgroup's frontier region (in each half) and triangle list region are
                 // its share of the capacities.
                 one_pass: [
-                    p.one_pass,
-                    level_cap / p.one_pass.max(1),
+                    p.one_pass(),
+                    level_cap / p.one_pass().max(1),
                     n_roots.min(level_cap),
                     p.levels,
                 ],
@@ -1097,8 +1120,8 @@ impl GpuContext {
             .bind
             .clone();
         let timers = bufs.timers.as_ref().filter(|_| timer_count(p) > 0);
-        if let (true, Some((_, one_pass_bg))) = (p.one_pass > 0, &bufs.one_pass) {
-            // Every level and the triangle tests in one dispatch of `p.one_pass` workgroups.
+        if let (true, Some((_, one_pass_bg))) = (p.one_pass() > 0, &bufs.one_pass) {
+            // Every level and the triangle tests in one dispatch of `p.one_pass()` workgroups.
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("frcd-gpgpu one-pass traversal"),
                 timestamp_writes: None,
@@ -1113,7 +1136,7 @@ impl GpuContext {
             });
             pass.set_bind_group(0, &arena_bg, &[]);
             pass.set_bind_group(1, one_pass_bg, &[]);
-            pass.dispatch_workgroups(p.one_pass, 1, 1);
+            pass.dispatch_workgroups(p.one_pass(), 1, 1);
             if let Some((set, _)) = timers {
                 pass.write_timestamp(set, 1);
             }
@@ -1238,9 +1261,19 @@ impl GpuContext {
                 })?;
             answer.timings.wait += waited.elapsed();
             answer.readbacks += 1;
+            // A one-pass workgroup that would have run past its loop budget stopped (`counts[2]`
+            // set): the answer is incomplete, and the batch re-runs as the level chain.
+            if p.one_pass() > 0 && state.counts[2] != 0 {
+                log::debug!(
+                    "frcd-gpgpu: the one-pass traversal ran out of its loop budget, re-running as the level chain"
+                );
+                p.one_pass.store(0, std::sync::atomic::Ordering::Relaxed);
+                answer.reruns += 1;
+                continue;
+            }
             // What the last level appended (nothing when the traversal finished; the one-pass
             // traversal adds what a workgroup left after the most levels to `counts[1]`).
-            let cur = if p.one_pass > 0 {
+            let cur = if p.one_pass() > 0 {
                 state.counts[1]
             } else {
                 state.counts[p.levels as usize % 3]
@@ -1249,7 +1282,7 @@ impl GpuContext {
             let mut rerun = false;
             // The level chain's dispatches cover at most `most` entries (the one-pass
             // traversal's workgroups loop over theirs).
-            let most = if p.one_pass == 0 {
+            let most = if p.one_pass() == 0 {
                 dispatchable(self)
             } else {
                 u32::MAX
@@ -1330,7 +1363,7 @@ impl GpuContext {
                 ticks[..last].windows(2).map(|w| span(w[0], w[1])).collect();
             // The one-pass traversal's triangle tests are inside its one dispatch.
             answer.timings.gpu_triangles =
-                (p.one_pass == 0).then(|| span(ticks[last - 1], ticks[last]));
+                (p.one_pass() == 0).then(|| span(ticks[last - 1], ticks[last]));
             answer.timings.gpu_total = Some(span(ticks[0], ticks[last]));
         }
         let deciding = std::time::Instant::now();
@@ -1399,7 +1432,7 @@ mod tests {
             leaf_pairs: 0,
             exact: false,
             roots: Vec::new(),
-            one_pass: 0,
+            one_pass: 0.into(),
             host_tests: 0,
             host_steps: 0,
             host_time: std::time::Duration::ZERO,
@@ -1513,7 +1546,7 @@ mod tests {
             leaf_pairs: 0,
             exact: false,
             roots: Vec::new(),
-            one_pass: 0,
+            one_pass: 0.into(),
             host_tests: 0,
             host_steps: 0,
             host_time: std::time::Duration::ZERO,

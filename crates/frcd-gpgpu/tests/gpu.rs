@@ -821,6 +821,115 @@ fn pass_timers_time_every_level_and_leave_the_answer_alone() {
     );
 }
 
+/// llvmpipe silently ends an invocation's loops after 65,535 iterations in all, so a one-pass
+/// workgroup whose share needs more than its loop budget stops and the batch re-runs as the
+/// level chain: with a budget too small for the batch, the answers are still the oracle's,
+/// one re-run more, and the node pairs tested are the level chain's; with the default budget
+/// the same batch needs no re-run.
+#[test]
+fn a_one_pass_run_past_its_loop_budget_reruns_as_the_level_chain() {
+    let Some(mut ctx) = new_context() else { return };
+    let a = body(&ctx, shapes::icosphere(1.0, 3));
+    let b = body(&ctx, shapes::torus(0.8, 0.25, 48, 16).expect("torus"));
+    let poses: Vec<(Pose, Pose)> = (0..4)
+        .map(|k| {
+            let at = DVec3::new(5.0 * k as f64, 0.0, 0.0);
+            (
+                Pose::from_translation(at),
+                Pose::new(
+                    at + DVec3::new(0.6, 0.1, 0.05 * k as f64),
+                    DQuat::from_rotation_x(0.4 * k as f64),
+                ),
+            )
+        })
+        .collect();
+    let want: Vec<_> = poses
+        .iter()
+        .map(|(pa, pb)| oracle::pairs(&a.mesh, pa, &b.mesh, pb))
+        .collect();
+    assert!(want.iter().all(|w| !w.is_empty()));
+    let batch: Vec<_> = poses
+        .iter()
+        .map(|(pa, pb)| (&a.gpu, pa, &b.gpu, pb))
+        .collect();
+    ctx.set_one_pass(0);
+    let chain = ctx
+        .collide_batch(&batch, &mut QueryScratch::default())
+        .expect("level chain");
+    ctx.set_one_pass(2);
+    let mut scratch = QueryScratch::default();
+    let fits = ctx.collide_batch(&batch, &mut scratch).expect("one pass");
+    assert_eq!(fits.reruns, 0);
+    for budget in [0, 1, 40] {
+        ctx.set_one_pass_loop_budget(budget);
+        let got = ctx
+            .collide_batch(&batch, &mut scratch)
+            .expect("over budget");
+        for (k, (r, w)) in got.results.iter().zip(&want).enumerate() {
+            assert_eq!(&r.pairs, w, "budget {budget}, pair {k}");
+        }
+        assert_eq!(got.reruns, 1, "budget {budget}");
+        assert_eq!(got.submissions, 2, "budget {budget}");
+        assert_eq!(
+            (got.node_pairs_tested, got.levels),
+            (chain.node_pairs_tested, chain.levels),
+            "budget {budget}"
+        );
+    }
+    ctx.set_one_pass_loop_budget(frcd_gpgpu::ONE_PASS_LOOP_BUDGET);
+    let again = ctx.collide_batch(&batch, &mut scratch).expect("one pass");
+    assert_eq!(
+        (again.reruns, again.node_pairs_tested),
+        (0, fits.node_pairs_tested)
+    );
+}
+
+/// A batch whose share for one workgroup needs more loop iterations than llvmpipe runs (65,535
+/// in all per invocation): with the default budget the workgroup stops short of it and the
+/// batch re-runs as the level chain, with the oracle's answers; with no budget, llvmpipe's
+/// cut ends the loops early (printed, not asserted: it depends on the driver).
+#[test]
+fn a_one_pass_batch_past_the_drivers_loop_limit_keeps_its_pairs() {
+    let Some(mut ctx) = new_context() else { return };
+    let a = body(&ctx, shapes::icosphere(1.0, 3));
+    let b = body(&ctx, shapes::torus(0.8, 0.25, 48, 16).expect("torus"));
+    let (pa, pb) = (
+        Pose::IDENTITY,
+        Pose::new(DVec3::new(0.6, 0.1, 0.0), DQuat::from_rotation_x(0.4)),
+    );
+    let want = oracle::pairs(&a.mesh, &pa, &b.mesh, &pb);
+    assert!(!want.is_empty());
+    ctx.set_one_pass(1);
+    ctx.set_host_front(0);
+    let one = ctx
+        .collide_batch(&[(&a.gpu, &pa, &b.gpu, &pb)], &mut QueryScratch::default())
+        .expect("one pair");
+    // Enough copies of the pair that one workgroup's entries alone take > 65,535 rounds of 64.
+    let copies = (65_536 * 64 * 4 / one.node_pairs_tested.max(1) + 1) as usize;
+    let batch = vec![(&a.gpu, &pa, &b.gpu, &pb); copies];
+    let mut scratch = QueryScratch::default();
+    let got = ctx.collide_batch(&batch, &mut scratch).expect("batch");
+    assert!(got.reruns >= 1, "{copies} copies fit the loop budget");
+    for (k, r) in got.results.iter().enumerate() {
+        assert_eq!(r.pairs, want, "copy {k}");
+    }
+    // Without the budget: on llvmpipe (Mesa 22.3.6, 2026-12-02) the driver's cut ended the
+    // level loop early and the batch was refused ("174762 node pairs left after 13 levels").
+    ctx.set_one_pass_loop_budget(u32::MAX);
+    let outcome = match ctx.collide_batch(&batch, &mut scratch) {
+        Ok(r) => {
+            let lost = r.results.iter().filter(|r| r.pairs != want).count();
+            format!("{lost} copies lost pairs")
+        }
+        Err(e) => format!("refused: {e}"),
+    };
+    println!(
+        "{copies} copies, {} node pairs tested; without the budget on {}: {outcome}",
+        got.node_pairs_tested,
+        ctx.adapter_info().name
+    );
+}
+
 /// The one-pass traversal (`GpuContext::set_one_pass`): for any number of workgroups, with and
 /// without the CPU's front, and through overflow re-runs of its per-workgroup regions, a frame of
 /// many body pairs equals the oracle pair for pair, and it tests exactly the node pairs and

@@ -10,7 +10,8 @@
 // size its predecessor read), see `Level`.
 struct State {
     // Entries appended to each level's frontier, by level mod 3 (may exceed the capacity:
-    // overflow).
+    // overflow). The one-pass traversal: [1] entries left after the most levels (an error),
+    // [2] non-zero when a workgroup stopped at its loop budget.
     counts: array<atomic<u32>, 3>,
     // Triangle pairs appended to the output (may exceed the capacity: overflow).
     out: atomic<u32>,
@@ -38,7 +39,8 @@ struct Level {
 struct Params {
     // frontier capacity, output capacity, max workgroups per dimension, pairs in the batch
     caps: vec4<u32>,
-    // triangle list capacity, unused, unused, unused
+    // triangle list capacity; the one-pass traversal's loop budget per invocation and loop
+    // iterations per frontier entry at most; unused
     caps2: vec4<u32>,
     // The one-pass traversal (`traverse_all`): workgroups, frontier entries per workgroup
     // (each of its two halves), the batch's first-level entries, most levels.

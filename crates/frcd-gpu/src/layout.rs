@@ -10,7 +10,9 @@ use bytemuck::{Pod, Zeroable};
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
 pub struct State {
     /// Entries appended to each level's frontier, by level mod 3 (after the batch, the entry
-    /// of `levels % 3` holds what the last level left: 0 when the traversal finished).
+    /// of `levels % 3` holds what the last level left: 0 when the traversal finished). The
+    /// one-pass traversal: `[1]` entries left after the most levels, `[2]` non-zero when a
+    /// workgroup stopped at its loop budget.
     pub counts: [u32; 3],
     /// Triangle pairs appended to the output (may exceed its capacity: overflow).
     pub out: u32,
@@ -43,7 +45,8 @@ pub struct Level {
 pub struct Params {
     /// Frontier capacity, output capacity, max workgroups per dimension, pairs in the batch.
     pub caps: [u32; 4],
-    /// Triangle list capacity, then unused.
+    /// Triangle list capacity; the one-pass traversal's loop budget per invocation and loop
+    /// iterations per frontier entry at most; unused.
     pub caps2: [u32; 4],
     /// The one-pass traversal: workgroups, frontier entries per workgroup (in each of its two
     /// halves), the first level's entries, most levels.
