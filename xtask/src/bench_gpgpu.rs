@@ -97,7 +97,7 @@ pub struct Opts {
     /// empty: skipped.
     #[arg(long = "checker-parts", value_name = "N,..", value_delimiter = ',')]
     pub checker: Vec<usize>,
-    /// Checker section: also time GPGPU `check` with GPU trees of these leaf sizes
+    /// Checker section: also time GPGPU `check` and `check_pipelined` with GPU trees of these leaf sizes
     /// (`frcd_hybrid::Options::gpu_build`), alternated run by run with the default's in one
     /// process (answers checked equal to the CPU backend's); empty: skipped.
     #[arg(
@@ -106,7 +106,7 @@ pub struct Opts {
         value_delimiter = ','
     )]
     pub checker_gpu_leaves: Vec<u32>,
-    /// Checker section: also time GPGPU `check` with these CPU fronts (box tests per level,
+    /// Checker section: also time GPGPU `check` and `check_pipelined` with these CPU fronts (box tests per level,
     /// `frcd_hybrid::Options::gpu_host_front`; 0: the GPU starts at the roots), alternated
     /// run by run with the default's in one process (answers checked equal); empty: skipped.
     #[arg(
@@ -115,7 +115,7 @@ pub struct Opts {
         value_delimiter = ','
     )]
     pub checker_host_front: Vec<u32>,
-    /// Checker section: also time GPGPU `check` with the pair batch's traversal in one dispatch
+    /// Checker section: also time GPGPU `check` and `check_pipelined` with the pair batch's traversal in one dispatch
     /// of these workgroups (`frcd_hybrid::Options::gpu_one_pass`; 0: one dispatch per level),
     /// each with the default CPU front and with every front of `--checker-host-front`,
     /// alternated run by run with the default's in one process (answers checked equal).
@@ -125,7 +125,7 @@ pub struct Opts {
         value_delimiter = ','
     )]
     pub checker_one_pass: Vec<u32>,
-    /// Checker section: also time GPGPU `check` re-deciding only the pairs the GPU left
+    /// Checker section: also time GPGPU `check` and `check_pipelined` re-deciding only the pairs the GPU left
     /// uncertain (`frcd_hybrid::Options::gpu_recheck_certified` false), alternated run by run
     /// with the default's in one process (answers checked equal).
     #[arg(long = "checker-recheck-uncertain")]
@@ -1372,7 +1372,7 @@ fn checker_variants(
     warm: Duration,
     changes: &[(String, frcd_hybrid::Options)],
 ) -> Result<()> {
-    use frcd_hybrid::{Checker, FrameState};
+    use frcd_hybrid::{Checker, FrameState, Pipeline};
     let (bodies, frames) = checker_scene(n);
     let (gpu, cpu) = checker_options();
     let reference = Checker::new(bodies.clone(), &[], cpu)?;
@@ -1395,25 +1395,37 @@ fn checker_variants(
         }
     }
     let nf = frames.len() as f64;
-    // One 8-frame sequence of variant k, in ms per frame.
+    let mut pipes: Vec<Pipeline> = variants.iter().map(|_| Pipeline::new()).collect();
+    // One 8-frame sequence of variant k (k < variants: `check`; else variant k - variants
+    // through `check_pipelined` and the flush), in ms per frame.
+    let nv = variants.len();
     let mut sequence = |k: usize| {
         let t0 = Instant::now();
-        for poses in &frames {
-            std::hint::black_box(variants[k].1.check(poses, &mut states[k]).expect("checked"));
+        if k < nv {
+            for poses in &frames {
+                std::hint::black_box(variants[k].1.check(poses, &mut states[k]).expect("checked"));
+            }
+        } else {
+            let (c, pipe) = (&variants[k - nv].1, &mut pipes[k - nv]);
+            for poses in &frames {
+                std::hint::black_box(c.check_pipelined(poses, pipe).expect("checked"));
+            }
+            std::hint::black_box(c.flush_pipelined(pipe).expect("checked"));
         }
         t0.elapsed().as_secs_f64() * 1e3 / nf
     };
+    let slots = 2 * nv;
     // A hardware GPU first leaves its idle clock (as every GPU timing of this bench does).
     let t0 = Instant::now();
     while t0.elapsed() < warm {
-        (0..variants.len()).for_each(|k| {
+        (0..slots).for_each(|k| {
             sequence(k);
         });
     }
-    let mut times: Vec<Vec<f64>> = vec![Vec::new(); variants.len()];
+    let mut times: Vec<Vec<f64>> = vec![Vec::new(); slots];
     for run in 0..runs {
         // Every other run in reverse order, so that no variant always goes first.
-        let mut order: Vec<usize> = (0..variants.len()).collect();
+        let mut order: Vec<usize> = (0..slots).collect();
         if run % 2 == 1 {
             order.reverse();
         }
@@ -1423,11 +1435,19 @@ fn checker_variants(
     }
     let median = median_of;
     for (k, (name, _)) in variants.iter().enumerate() {
-        let ratio = median(times[k].iter().zip(&times[0]).map(|(a, b)| a / b).collect());
-        println!(
-            "checker, {n} parts, GPGPU check with {name}: {:.2} ms per frame (median of {runs}), {ratio:.3}x the default (median of per-run ratios)",
-            median(times[k].clone())
-        );
+        for (call, slot, base) in [("check", k, 0), ("check_pipelined", nv + k, nv)] {
+            let ratio = median(
+                times[slot]
+                    .iter()
+                    .zip(&times[base])
+                    .map(|(a, b)| a / b)
+                    .collect(),
+            );
+            println!(
+                "checker, {n} parts, GPGPU {call} with {name}: {:.2} ms per frame (median of {runs}), {ratio:.3}x the default (median of per-run ratios)",
+                median(times[slot].clone())
+            );
+        }
     }
     Ok(())
 }

@@ -114,8 +114,9 @@ pub const ONE_PASS_SOFTWARE_MAX: u32 = 64;
 /// software adapter one workgroup per thread the driver runs shaders on (lavapipe's
 /// `LP_NUM_THREADS`, by default the host's cores; at most [`ONE_PASS_SOFTWARE_MAX`]), since
 /// such a driver runs each workgroup on one thread; on a hardware adapter the level chain (0).
-/// Measured on a 2-core host with lavapipe (2026-12-02): 2 workgroups 0.90-0.94 of the level
-/// chain's checker frame, 4 about 0.97-1.04, 16 and more slower than the chain.
+/// Measured on a 2-core host with lavapipe (2026-12-02): with 2 workgroups the checker's 64-part
+/// frame took 0.81-0.94 of the level chain's, with 4 about 1.07 of 2's; 64 and 256 workgroups
+/// made one batch 2.3× and 7× slower than 2.
 fn one_pass_default(info: &wgpu::AdapterInfo) -> u32 {
     let var = |name: &str| std::env::var(name).ok().and_then(|v| v.parse::<u32>().ok());
     if let Some(n) = var(ONE_PASS_ENV) {
@@ -667,6 +668,20 @@ fn uniform(binding: u32) -> wgpu::BindGroupLayoutEntry {
     }
 }
 
+/// The pairs' poses: a 2D rgba32uint texture (`query::POSE_TEXELS` texels a pair).
+fn pose_texture(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Uint,
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
 fn texture(binding: u32, sample_type: wgpu::TextureSampleType) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
@@ -710,16 +725,7 @@ impl Pipelines {
                 storage(7, false),
                 uniform(8),
                 // The pairs' poses as rgba32uint texels (`query::POSE_TEXELS`).
-                wgpu::BindGroupLayoutEntry {
-                    binding: 9,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                pose_texture(9),
             ],
         );
         // The one-pass traversal: the first level's entries, the state, the triangle list, the
@@ -732,16 +738,7 @@ impl Pipelines {
                 storage(3, false),
                 uniform(4),
                 storage(5, true),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 9,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                pose_texture(9),
                 storage(10, false),
                 storage(11, false),
             ],

@@ -56,6 +56,24 @@ fn random_axis(rng: &mut StdRng) -> DVec3 {
     .normalize_or(DVec3::Z)
 }
 
+/// `n` random poses (seeded): x and y within ±`xy`, z within ±`z`, any rotation.
+fn scattered_poses(seed: u64, n: usize, xy: f64, z: f64) -> Vec<Pose> {
+    let mut rng = StdRng::seed_from_u64(seed);
+    (0..n)
+        .map(|_| {
+            let axis = random_axis(&mut rng);
+            Pose::new(
+                DVec3::new(
+                    rng.random_range(-xy..xy),
+                    rng.random_range(-xy..xy),
+                    rng.random_range(-z..z),
+                ),
+                DQuat::from_axis_angle(axis, rng.random_range(0.0..6.0)),
+            )
+        })
+        .collect()
+}
+
 struct Body {
     mesh: TriMesh,
     gpu: GpuMesh,
@@ -459,20 +477,7 @@ fn a_frame_of_many_pairs_is_one_submission() {
         shapes::cuboid(DVec3::new(0.9, 0.4, 0.2)),
     ];
     let bodies: Vec<Body> = meshes.iter().map(|m| body(&ctx, m.clone())).collect();
-    let mut rng = StdRng::seed_from_u64(99);
-    let poses: Vec<Pose> = (0..24)
-        .map(|_| {
-            let axis = random_axis(&mut rng);
-            Pose::new(
-                DVec3::new(
-                    rng.random_range(-1.5..1.5),
-                    rng.random_range(-1.5..1.5),
-                    rng.random_range(-0.5..0.5),
-                ),
-                DQuat::from_axis_angle(axis, rng.random_range(0.0..6.0)),
-            )
-        })
-        .collect();
+    let poses = scattered_poses(99, 24, 1.5, 0.5);
     let items: Vec<(usize, usize, usize, usize)> = (0..40)
         .map(|k| (k % 3, (k * 7) % 24, (k / 3) % 3, (k * 5 + 3) % 24))
         .collect();
@@ -944,20 +949,7 @@ fn the_one_pass_traversal_equals_the_oracle_and_the_level_chain() {
         shapes::cuboid(DVec3::new(0.9, 0.4, 0.2)),
     ];
     let bodies: Vec<Body> = meshes.iter().map(|m| body(&ctx, m.clone())).collect();
-    let mut rng = StdRng::seed_from_u64(1234);
-    let poses: Vec<Pose> = (0..30)
-        .map(|_| {
-            let axis = random_axis(&mut rng);
-            Pose::new(
-                DVec3::new(
-                    rng.random_range(-1.2..1.2),
-                    rng.random_range(-1.2..1.2),
-                    rng.random_range(-0.4..0.4),
-                ),
-                DQuat::from_axis_angle(axis, rng.random_range(0.0..6.0)),
-            )
-        })
-        .collect();
+    let poses = scattered_poses(1234, 30, 1.2, 0.4);
     let items: Vec<(usize, usize, usize, usize)> = (0..45)
         .map(|k| (k % 3, (k * 7) % 30, (k / 3) % 3, (k * 11 + 5) % 30))
         .collect();
