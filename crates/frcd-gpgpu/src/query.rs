@@ -1098,7 +1098,9 @@ impl GpuContext {
         let roots = n_roots.min(level_cap);
         let start = State {
             counts: [roots, 0, 0],
-            needed: n_roots,
+            // (The one-pass traversal's `needed` is its regions' demand alone; `run` compares
+            // the root count with the level's capacity itself.)
+            needed: if p.one_pass() > 0 { 0 } else { n_roots },
             tri_args: [0, 1, 1],
             ..State::default()
         };
@@ -1278,7 +1280,23 @@ impl GpuContext {
             } else {
                 state.counts[p.levels as usize % 3]
             };
-            let (out_count, needed) = (state.out, state.needed);
+            let out_count = state.out;
+            // The one-pass traversal's regions hold (level capacity / G) entries each, and an
+            // overflowing one reports its demand times G: that is compared with what the
+            // regions hold, not the whole buffer (the level capacity can be below it,
+            // `level_cap`), so a stopped workgroup is never taken for a finished one; its first
+            // level is read from the whole first buffer, within the level capacity.
+            let n_roots = p.roots.len() as u32;
+            let (needed, short) = match p.one_pass() {
+                0 => (state.needed, state.needed > bufs.frontier_cap),
+                g => {
+                    let lc = level_cap(bufs.frontier_cap, p.leaf_pairs);
+                    (
+                        state.needed.max(n_roots),
+                        state.needed > lc / g * g || n_roots > lc,
+                    )
+                }
+            };
             let mut rerun = false;
             // The level chain's dispatches cover at most `most` entries (the one-pass
             // traversal's workgroups loop over theirs).
@@ -1312,7 +1330,7 @@ impl GpuContext {
                     });
                 }
             }
-            if needed > bufs.frontier_cap {
+            if short {
                 scratch.frontier_cap = needed.max(bufs.frontier_cap.saturating_mul(2));
                 rerun = true;
             }
