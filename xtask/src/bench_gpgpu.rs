@@ -97,37 +97,39 @@ pub struct Opts {
     /// empty: skipped.
     #[arg(long = "checker-parts", value_name = "N,..", value_delimiter = ',')]
     pub checker: Vec<usize>,
-    /// Checker section: also time GPGPU `check` and `check_pipelined` with GPU trees of these leaf sizes
-    /// (`frcd_hybrid::Options::gpu_build`), alternated run by run with the default's in one
-    /// process (answers checked equal to the CPU backend's); empty: skipped.
+    /// Checker section: also time GPGPU `check` and `check_pipelined` with GPU trees of these
+    /// leaf sizes (`frcd_hybrid::Options::gpu_build`), alternated run by run with the default's
+    /// in one process (answers checked equal to the CPU backend's); empty: skipped.
     #[arg(
         long = "checker-gpu-leaves",
         value_name = "N,..",
         value_delimiter = ','
     )]
     pub checker_gpu_leaves: Vec<u32>,
-    /// Checker section: also time GPGPU `check` and `check_pipelined` with these CPU fronts (box tests per level,
-    /// `frcd_hybrid::Options::gpu_host_front`; 0: the GPU starts at the roots), alternated
-    /// run by run with the default's in one process (answers checked equal); empty: skipped.
+    /// Checker section: also time GPGPU `check` and `check_pipelined` with these CPU fronts
+    /// (box tests per level, `frcd_hybrid::Options::gpu_host_front`; 0: the GPU starts at the
+    /// roots), alternated run by run with the default's in one process (answers checked
+    /// equal); empty: skipped.
     #[arg(
         long = "checker-host-front",
         value_name = "TESTS,..",
         value_delimiter = ','
     )]
     pub checker_host_front: Vec<u32>,
-    /// Checker section: also time GPGPU `check` and `check_pipelined` with the pair batch's traversal in one dispatch
-    /// of these workgroups (`frcd_hybrid::Options::gpu_one_pass`; 0: one dispatch per level),
-    /// each with the default CPU front and with every front of `--checker-host-front`,
-    /// alternated run by run with the default's in one process (answers checked equal).
+    /// Checker section: also time GPGPU `check` and `check_pipelined` with the pair batch's
+    /// traversal in one dispatch of these workgroups (`frcd_hybrid::Options::gpu_one_pass`; 0:
+    /// one dispatch per level), each with the default CPU front and with every front of
+    /// `--checker-host-front`, alternated run by run with the default's in one process (answers
+    /// checked equal).
     #[arg(
         long = "checker-one-pass",
         value_name = "WORKGROUPS,..",
         value_delimiter = ','
     )]
     pub checker_one_pass: Vec<u32>,
-    /// Checker section: also time GPGPU `check` and `check_pipelined` re-deciding only the pairs the GPU left
-    /// uncertain (`frcd_hybrid::Options::gpu_recheck_certified` false), alternated run by run
-    /// with the default's in one process (answers checked equal).
+    /// Checker section: also time GPGPU `check` and `check_pipelined` re-deciding only the
+    /// pairs the GPU left uncertain (`frcd_hybrid::Options::gpu_recheck_certified` false),
+    /// alternated run by run with the default's in one process (answers checked equal).
     #[arg(long = "checker-recheck-uncertain")]
     pub checker_recheck_uncertain: bool,
     /// Checker section: also time GPGPU `check_pipelined` in both orders of a call's work

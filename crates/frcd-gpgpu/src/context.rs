@@ -367,6 +367,8 @@ impl GpuContext {
             0
         };
         let limits = device.limits();
+        // One dispatch of G workgroups: at most the device's workgroups per dimension.
+        let one_pass = one_pass.min(limits.max_compute_workgroups_per_dimension);
         check_limits(&limits, &info.name)?;
         // A driver that rejects a shader or pipeline gives a typed error, not a panic.
         let creating = frcd_gpu::creation_lock();
@@ -517,7 +519,7 @@ impl GpuContext {
     /// as lavapipe, where each level cost 100-200 µs before it did any work; on hardware it
     /// would leave most of the GPU idle. Default: one workgroup per thread of a software
     /// adapter (see [`ONE_PASS_SOFTWARE_MAX`]), 0 on hardware ones ([`ONE_PASS_ENV`] overrides
-    /// both).
+    /// both). Held at the device's `max_compute_workgroups_per_dimension`.
     ///
     /// ```no_run
     /// # fn main() -> Result<(), frcd_gpgpu::GpuError> {
@@ -528,7 +530,9 @@ impl GpuContext {
     /// # }
     /// ```
     pub fn set_one_pass(&mut self, workgroups: u32) {
-        self.one_pass = workgroups;
+        // One dispatch of `workgroups` along x: more than the device allows per dimension would
+        // be a validation error at the dispatch, so it is held at the limit.
+        self.one_pass = workgroups.min(self.limits.max_compute_workgroups_per_dimension);
     }
 
     /// Workgroups of the one-pass traversal, 0 for the level chain

@@ -883,6 +883,7 @@ fn a_one_pass_run_past_its_loop_budget_reruns_as_the_level_chain() {
     }
     ctx.set_one_pass_loop_budget(frcd_gpgpu::ONE_PASS_LOOP_BUDGET);
     let again = ctx.collide_batch(&batch, &mut scratch).expect("one pass");
+
     assert_eq!(
         (again.reruns, again.node_pairs_tested),
         (0, fits.node_pairs_tested)
@@ -1406,6 +1407,25 @@ fn two_dimensional_grids_without_indirect_validation() {
             assert!(needed > limit, "{needed}");
         }
         other => panic!("expected CapacityExceeded, got {other:?}"),
+    }
+    // The one-pass traversal's workgroups are one dispatch along x: more than the device's 8
+    // per dimension are held at 8 (not a validation error at the dispatch), with the oracle's
+    // answers.
+    ctx.set_one_pass(u32::MAX);
+    assert_eq!(ctx.one_pass(), 8);
+    let small: Vec<_> = poses
+        .iter()
+        .map(|(pa, pb)| (&a.gpu, pa, &a.gpu, pb))
+        .collect();
+    let got = ctx
+        .collide_batch(&small, &mut QueryScratch::default())
+        .expect("8 workgroups");
+    for (k, (pa, pb)) in poses.iter().enumerate() {
+        assert_eq!(
+            got.results[k].pairs,
+            oracle::pairs(&a.mesh, pa, &a.mesh, pb),
+            "pair {k}, one pass"
+        );
     }
 }
 
