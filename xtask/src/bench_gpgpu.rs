@@ -137,6 +137,12 @@ pub struct Opts {
     /// k+1's batch is submitted), alternated run by run in one process (answers checked equal).
     #[arg(long = "checker-pipeline-orders")]
     pub checker_pipeline_orders: bool,
+    /// Checker section: after the timings, run only GPGPU `check` on the frames, over and over,
+    /// for this many seconds (for a profiler such as `perf record` to see the GPGPU frame alone,
+    /// without the CPU backend's frames or the scene's setup in its samples); prints the frames
+    /// per second. Left out: not run.
+    #[arg(long = "checker-soak-s", value_name = "SECONDS")]
+    pub checker_soak_s: Option<f64>,
     /// Time every GPU pass of the batches with GPU timestamps (where the adapter has
     /// timestamps inside passes) for the breakdown table; the host's split (waiting for the
     /// GPU, the CPU's re-decision) is always written.
@@ -795,6 +801,9 @@ pub fn run(mut o: Opts) -> Result<()> {
         if o.checker_pipeline_orders {
             checker_pipeline_orders(n, o.runs, warm)?;
         }
+        if let Some(s) = o.checker_soak_s {
+            checker_soak(n, Duration::from_secs_f64(s.max(0.0)))?;
+        }
     }
 
     let mut box_rows = Vec::new();
@@ -1451,6 +1460,39 @@ fn checker_variants(
             );
         }
     }
+    Ok(())
+}
+
+/// GPGPU `check` alone on the checker section's frames, over and over for `time`, after one
+/// sequence checked against the CPU backend (`--checker-soak-s`); prints frames per second.
+fn checker_soak(n: usize, time: Duration) -> Result<()> {
+    use frcd_hybrid::{Checker, FrameState};
+    let (bodies, frames) = checker_scene(n);
+    let (gpu, cpu) = checker_options();
+    let reference = Checker::new(bodies.clone(), &[], cpu)?;
+    let checker = Checker::new(bodies, &[], gpu)?;
+    let (mut s_cpu, mut s_gpu) = (FrameState::default(), FrameState::default());
+    for poses in &frames {
+        if contact_keys(&checker.check(poses, &mut s_gpu)?)
+            != contact_keys(&reference.check(poses, &mut s_cpu)?)
+        {
+            bail!("checker soak, {n} parts: GPGPU check differs from the CPU backend");
+        }
+    }
+    drop(reference);
+    let t0 = Instant::now();
+    let mut count = 0u64;
+    while t0.elapsed() < time {
+        for poses in &frames {
+            std::hint::black_box(checker.check(poses, &mut s_gpu)?);
+            count += 1;
+        }
+    }
+    let secs = t0.elapsed().as_secs_f64();
+    println!(
+        "checker soak, {n} parts: {count} GPGPU check frames in {secs:.1} s, {:.3} ms per frame",
+        secs * 1e3 / count.max(1) as f64
+    );
     Ok(())
 }
 
