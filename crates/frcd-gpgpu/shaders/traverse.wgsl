@@ -854,18 +854,30 @@ fn traverse(@builtin(workgroup_id) wid: vec3<u32>,
 // costs more than the work of a level (a software driver such as llvmpipe: 100-200 µs a level
 // before it does any work, measured 2026-12-02). Workgroup g owns the first level's entries
 // g, g + G, g + 2G, ... (G workgroups; the CPU's front interleaves the body pairs, so each
-// gets a share of every pair) and descends them level by level on its own, the levels
-// separated by workgroup barriers: its frontier is its region of `halves` (two halves of
-// `one_pass.y` entries each, one read and one written per level), its triangle list its region
-// of `tri_list` (caps2.x / G entries), tested after its last level. No workgroup waits for
-// another (WGSL gives no barrier across workgroups, and a driver need not run them at once).
-// Overflow of a region records what the whole buffer would need (the region's demand times G)
-// and stops the workgroup; the CPU re-runs with larger buffers, as for the level chain.
+// gets a share of every pair), copies them to its region of `halves` and descends them level
+// by level on its own, the levels separated by workgroup barriers: its frontier is that region
+// (two halves of `one_pass.y` entries each, one read and one written per level), its list its
+// region of `tri_list` (caps2.x / G entries), tested after its last level. No workgroup waits
+// for another (WGSL gives no barrier across workgroups, and a driver need not run them at
+// once). Overflow of a region records what the whole buffer would need (the region's demand
+// times G) and stops the workgroup; the CPU re-runs with larger buffers, as for the level
+// chain.
+//
+// The list holds one entry per overlapping pair of leaves, (pair, A's leaf word, B's leaf word)
+// (a leaf's word is its first triangle and count, `Node.first_child`), not one per triangle
+// pair as the level chain's does; `test_leaf_pair` tests the leaves' triangles against each
+// other. On llvmpipe every storage access in the code is a loop over the lanes, run whether
+// or not a lane takes it: listing the triangle pairs (nested loops of stores per leaf pair)
+// took 15-30 % of a 64-part frame's traversal (2026-12-02), one store per leaf pair far less.
+//
 // llvmpipe silently ends an invocation's loops once they have run 65,535 iterations in all, so
-// each workgroup counts a bound on its invocations' iterations before each level and before
-// its triangle tests (caps2.z per frontier entry: the entry's own iteration and up to four leaf
-// pairs' listing loops; one per triangle pair; both per WG entries), and stops short of the
-// budget caps2.y, flagging `counts[2]`: the CPU then re-runs the batch as the level chain.
+// each workgroup counts a bound on its invocations' iterations before the copy of its first
+// level, before each level (one per WG entries, plus the level's own) and before its leaf-pair
+// tests (caps2.z per WG listed leaf pairs: the loop over them and the two loops over their
+// triangles), and stops short of the budget caps2.y, flagging `counts[2]`: the CPU then re-runs
+// the batch as the level chain. The budget (at most `ONE_PASS_LOOP_BUDGET`) also bounds what a
+// workgroup lists: at most four leaf pairs per entry, WG entries per budgeted iteration, far
+// below 2^31, so its list counter never wraps.
 @group(1) @binding(10) var<storage, read_write> halves: array<vec4<u32>>;
 @group(1) @binding(11) var<storage, read_write> out_all: array<vec4<u32>>;
 
@@ -874,30 +886,50 @@ var<workgroup> wg_tris: atomic<u32>;
 var<workgroup> wg_count: u32;
 var<workgroup> wg_stopped: u32;
 
-// Reserves `k` entries of this workgroup's triangle list; as `reserve_tris`, the counter
-// stops near 2^31 (each level lists less than 2^31 triangle pairs: `query::level_cap`).
-fn reserve_region_tris(k: u32) -> u32 {
-    let base = atomicAdd(&wg_tris, k);
-    if base + k > 0x80000000u {
-        atomicMin(&wg_tris, 0x80000000u);
+// Lists the overlapping leaves `na` of pair p's A and `nb` of its B at entry `w` of this
+// workgroup's list (`first`: the region's first entry, `cap`: its size; nothing is written past
+// it, and the list's total below tells the CPU).
+fn list_leaf_pair(w: u32, first: u32, cap: u32, p: u32, na: Node, nb: Node) {
+    if w < cap {
+        tri_list[first + w] = vec4<u32>(p, na.first_child, nb.first_child, 0u);
     }
-    return base;
 }
 
-// Writes the triangle pairs of two overlapping leaves to this workgroup's list region (`first`:
-// the region's first entry, `cap`: its size), from entry `w0` of it on; returns the entry after
-// them.
-fn write_region_leaf_pair(p: u32, na: Node, nb: Node, w0: u32, first: u32, cap: u32) -> u32 {
-    var w = w0;
-    for (var i = 0u; i < na.count; i++) {
-        for (var j = 0u; j < nb.count; j++) {
-            if w < cap {
-                tri_list[first + w] = vec4<u32>(p, na.first + i, nb.first + j, 0u);
+// The triangle tests of one listed pair of leaves (`entry`: pair, A's leaf word, B's leaf
+// word): every triangle of A's leaf against every triangle of B's, each pair appended to the
+// output, as `test_listed` does for one pair, unless it is certainly disjoint.
+fn test_leaf_pair(entry: vec4<u32>) {
+    load_pose(entry.x);
+    let w4 = textureLoad(poses, vec2<u32>((entry.x & 255u) * 5u + 4u, entry.x >> 8u), 0);
+    pose.fix = bitcast<vec4<i32>>(vec4<u32>(w4.yzw, 0u));
+    let lay = arena.tri_layout;
+    let first_a = entry.y & 0xffffffu;
+    let count_a = (entry.y >> 24u) + 1u;
+    let first_b = entry.z & 0xffffffu;
+    let count_b = (entry.z >> 24u) + 1u;
+    for (var i = 0u; i < count_a; i++) {
+        let sa = slot(lay, 3u, pose.base.y + first_a + i);
+        let a0 = texel(tris, sa, 0u);
+        let a1 = texel(tris, sa, 1u);
+        let a2 = texel(tris, sa, 2u);
+        for (var j = 0u; j < count_b; j++) {
+            let sb = slot(lay, 3u, pose.base.w + first_b + j);
+            let b0 = texel(tris, sb, 0u);
+            let b1 = texel(tris, sb, 1u);
+            let b2 = texel(tris, sb, 2u);
+            let r = tri_pair(entry.x, a0, a1, a2, b0, b1, b2);
+            if r != TRI_DISJOINT {
+                var tag = u32(b0.w);
+                if r == TRI_UNCERTAIN {
+                    tag = tag | UNCERTAIN_FLAG;
+                }
+                let o = atomicAdd(&state.out, 1u);
+                if o < params.caps.y {
+                    out_all[o] = vec4<u32>(entry.x, u32(a0.w), tag, 0u);
+                }
             }
-            w++;
         }
     }
-    return w;
 }
 
 @compute @workgroup_size(64)
@@ -921,39 +953,66 @@ fn traverse_all(@builtin(workgroup_id) wid: vec3<u32>,
     // Loop iterations spent (a bound, the same in every invocation), and whether the budget
     // stopped the workgroup.
     let budget = params.caps2.y;
-    let per_entry = max(params.caps2.z, 1u);
     var spent = 0u;
     var over = false;
+    // The first level copied to this workgroup's first half, so that every level reads one
+    // buffer (on llvmpipe a storage access is paid in full even where no lane takes it). A
+    // share above the region cannot happen (the CPU sizes the regions for the first level);
+    // it would record its demand and stop, as an overflowing level does.
+    if cur > region {
+        atomicMax(&state.needed, min(cur, 0xffffffffu / groups) * groups);
+        cur = 0u;
+    } else if cur > 0u {
+        let rounds = (cur + WG - 1u) / WG;
+        if rounds >= budget {
+            over = true;
+            cur = 0u;
+        } else {
+            spent = rounds + 1u;
+            for (var j = lid; j < cur; j += WG) {
+                halves[g * region + j] = frontier_in[g + j * groups];
+            }
+            storageBarrier();
+        }
+    }
     loop {
         if cur == 0u || level >= params.one_pass.w {
             break;
         }
-        // This level: its own iteration of the level loop, and its entries' (per_entry each,
-        // one WG-wide round of entries at a time).
+        // This level: its own iteration of the level loop, and one per WG-wide round of its
+        // entries.
         let rounds = (cur + WG - 1u) / WG;
-        let left = budget - min(spent, budget);
-        if left == 0u || rounds > (left - 1u) / per_entry {
+        if rounds >= budget - min(spent, budget) {
             over = true;
             break;
         }
-        spent += rounds * per_entry + 1u;
+        spent += rounds + 1u;
         workgroupBarrier();
         let read_base = half * region * groups + g * region;
         let write_base = (1u - half) * region * groups + g * region;
         for (var j = lid; j < cur; j += WG) {
-            var entry: vec4<u32>;
-            if level == 0u {
-                entry = frontier_in[g + j * groups];
-            } else {
-                entry = halves[read_base + j];
-            }
+            let entry = halves[read_base + j];
             let x = expand(entry);
-            if x.k > 0u {
-                var w = reserve_region_tris(x.k);
-                if x.leaf.x { w = write_region_leaf_pair(entry.x, x.a0, x.b0, w, tri_first, tri_region); }
-                if x.leaf.y { w = write_region_leaf_pair(entry.x, x.a1, x.b0, w, tri_first, tri_region); }
-                if x.leaf.z { w = write_region_leaf_pair(entry.x, x.a0, x.b1, w, tri_first, tri_region); }
-                if x.leaf.w { w = write_region_leaf_pair(entry.x, x.a1, x.b1, w, tri_first, tri_region); }
+            // Overlapping pairs of leaves: one list entry each.
+            let ls = select(vec4<u32>(0u), vec4<u32>(1u), x.leaf);
+            let nl = ls.x + ls.y + ls.z + ls.w;
+            if nl > 0u {
+                var w = atomicAdd(&wg_tris, nl);
+                if x.leaf.x {
+                    list_leaf_pair(w, tri_first, tri_region, entry.x, x.a0, x.b0);
+                    w++;
+                }
+                if x.leaf.y {
+                    list_leaf_pair(w, tri_first, tri_region, entry.x, x.a1, x.b0);
+                    w++;
+                }
+                if x.leaf.z {
+                    list_leaf_pair(w, tri_first, tri_region, entry.x, x.a0, x.b1);
+                    w++;
+                }
+                if x.leaf.w {
+                    list_leaf_pair(w, tri_first, tri_region, entry.x, x.a1, x.b1);
+                }
             }
             if x.n > 0u {
                 var w = atomicAdd(&wg_next, x.n);
@@ -1018,19 +1077,15 @@ fn traverse_all(@builtin(workgroup_id) wid: vec3<u32>,
     if listed > tri_region || stopped || over {
         return;
     }
-    if (listed + WG - 1u) / WG > budget - min(spent, budget) {
+    // caps2.z per WG-wide round of listed leaf pairs.
+    let rounds = (listed + WG - 1u) / WG;
+    if rounds > (budget - min(spent, budget)) / max(params.caps2.z, 1u) {
         if lid == 0u {
             atomicMax(&state.counts[2], 1u);
         }
         return;
     }
     for (var j = lid; j < listed; j += WG) {
-        let t = test_listed(tri_list[tri_first + j]);
-        if t.w != 0u {
-            let o = atomicAdd(&state.out, 1u);
-            if o < params.caps.y {
-                out_all[o] = vec4<u32>(t.xyz, 0u);
-            }
-        }
+        test_leaf_pair(tri_list[tri_first + j]);
     }
 }

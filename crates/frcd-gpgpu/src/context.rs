@@ -103,8 +103,9 @@ pub const ONE_PASS_ENV: &str = "FRCD_GPGPU_ONE_PASS";
 /// and the batch re-runs as the level chain. llvmpipe silently ends a shader invocation's
 /// loops once they have run 65,535 iterations in all (Mesa's `LP_MAX_TGSI_LOOP_ITERATIONS`):
 /// a workgroup whose share of a large batch needs more would lose pairs there. The shader
-/// counts a bound on its iterations (each level's loop over its entries, the leaf pairs'
-/// listing loops, the triangle tests' loop) before it runs them and stops short of this.
+/// counts a bound on its iterations (the copy of its first level, each level's loop over its
+/// entries, the loops of its leaf pairs' triangle tests) before it runs them and stops short
+/// of this. [`GpuContext::set_one_pass_loop_budget`] never sets more.
 pub const ONE_PASS_LOOP_BUDGET: u32 = 49_152;
 
 /// Most workgroups [`GpuContext::set_one_pass`]'s default gives a software adapter.
@@ -541,12 +542,13 @@ impl GpuContext {
         self.one_pass
     }
 
-    /// Sets the one-pass traversal's loop budget per invocation (default
-    /// [`ONE_PASS_LOOP_BUDGET`]; at most that is safe on llvmpipe). For tests of the fallback
-    /// to the level chain.
+    /// Sets the one-pass traversal's loop budget per invocation (default and most
+    /// [`ONE_PASS_LOOP_BUDGET`]: at most that is safe on llvmpipe, and it bounds a workgroup's
+    /// list below 2^31 entries, see traverse.wgsl). For tests of the fallback to the level
+    /// chain.
     #[doc(hidden)]
     pub fn set_one_pass_loop_budget(&mut self, iterations: u32) {
-        self.one_pass_budget = iterations;
+        self.one_pass_budget = iterations.min(ONE_PASS_LOOP_BUDGET);
     }
 
     /// The CPU's share of the top of the pair trees ([`GpuContext::set_host_front`]).

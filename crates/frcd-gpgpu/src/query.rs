@@ -1056,13 +1056,13 @@ impl GpuContext {
             0,
             bytemuck::bytes_of(&Params {
                 caps: [level_cap, bufs.output_cap, max_groups, n],
-                // The one-pass traversal's loop budget, and what one frontier entry's loops
-                // take at most: its iteration of the level's loop, and listing up to four leaf
-                // pairs (na (1 + nb) <= 2 na nb iterations each).
+                // The one-pass traversal's loop budget, and what one round of its listed
+                // leaf pairs' tests takes at most: the round's iteration, and the loops over
+                // the two leaves' triangles (na + na nb <= 2 na nb iterations).
                 caps2: [
                     bufs.tri_cap,
                     self.one_pass_budget,
-                    (1 + 8 * p.leaf_pairs).min(u32::MAX as u64) as u32,
+                    (1 + 2 * p.leaf_pairs).min(u32::MAX as u64) as u32,
                     0,
                 ],
                 // Each workgroup's frontier region (in each half) and triangle list region are
@@ -1285,7 +1285,8 @@ impl GpuContext {
             // overflowing one reports its demand times G: that is compared with what the
             // regions hold, not the whole buffer (the level capacity can be below it,
             // `level_cap`), so a stopped workgroup is never taken for a finished one; its first
-            // level is read from the whole first buffer, within the level capacity.
+            // level is copied from the whole first buffer into its region, so the roots must
+            // fit the regions too.
             let n_roots = p.roots.len() as u32;
             let (needed, short) = match p.one_pass() {
                 0 => (state.needed, state.needed > bufs.frontier_cap),
@@ -1293,7 +1294,7 @@ impl GpuContext {
                     let lc = level_cap(bufs.frontier_cap, p.leaf_pairs);
                     (
                         state.needed.max(n_roots),
-                        state.needed > lc / g * g || n_roots > lc,
+                        state.needed > lc / g * g || n_roots > lc / g * g,
                     )
                 }
             };
@@ -1314,7 +1315,11 @@ impl GpuContext {
                 (
                     "node pairs one level lists (2^31 triangle pairs / (4 × the largest leaf pair's))",
                     needed,
-                    level_cap(u32::MAX, p.leaf_pairs),
+                    // The one-pass traversal's regions of the largest level hold a multiple of G.
+                    match p.one_pass() {
+                        0 => level_cap(u32::MAX, p.leaf_pairs),
+                        g => level_cap(u32::MAX, p.leaf_pairs) / g * g,
+                    },
                 ),
                 (
                     "triangle pairs one batch lists (workgroups per dimension squared × 64)",

@@ -1003,6 +1003,73 @@ fn the_one_pass_traversal_equals_the_oracle_and_the_level_chain() {
     }
 }
 
+/// The one-pass traversal lists one entry per pair of overlapping leaves and tests their
+/// triangles in two loops (`test_leaf_pair` in traverse.wgsl), where the level chain lists every
+/// triangle pair: with trees of leaves of 1, 2, 3 and 4 triangles mixed in one batch, the one
+/// pass (run as such: no fall-back to the chain) equals the oracle pair for pair and tests the
+/// chain's node pairs; leaves at `MAX_LEAF_TRIANGLES`, whose tests may take more than a
+/// workgroup's loop budget and then re-run as the chain, equal it too. A leaf's count decoded
+/// wrongly, or a loop bound off by one, loses or invents pairs here.
+#[test]
+fn the_one_pass_traversal_tests_leaves_of_every_size() {
+    let Some(mut ctx) = new_context() else { return };
+    let meshes = [
+        shapes::icosphere(1.0, 3),
+        shapes::torus(0.8, 0.25, 40, 14).expect("torus"),
+    ];
+    let poses = scattered_poses(77, 12, 0.9, 0.5);
+    for leaves in [&[1, 2, 3, 4][..], &[frcd_gpgpu::MAX_LEAF_TRIANGLES]] {
+        // Bodies (mesh, its tree on the GPU): every mesh at every leaf size.
+        let bodies: Vec<(usize, GpuMesh)> = leaves
+            .iter()
+            .flat_map(|&l| (0..meshes.len()).map(move |m| (m, l)))
+            .map(|(m, l)| {
+                let build = BuildOptions {
+                    max_leaf_triangles: l,
+                    ..BuildOptions::default()
+                };
+                let tree = ObbTree::build(&meshes[m], &build);
+                (m, ctx.upload(&tree).expect("upload"))
+            })
+            .collect();
+        let n = bodies.len();
+        let items: Vec<(usize, usize, usize, usize)> = (0..36)
+            .map(|k| (k % n, k % 12, (k * 7 + 3) % n, (k * 5 + 1) % 12))
+            .collect();
+        let want: Vec<_> = items
+            .iter()
+            .map(|&(a, pa, b, pb)| {
+                let (ma, mb) = (&meshes[bodies[a].0], &meshes[bodies[b].0]);
+                oracle::pairs(ma, &poses[pa], mb, &poses[pb])
+            })
+            .collect();
+        let touching = want.iter().filter(|w| !w.is_empty()).count();
+        assert!(touching > 5 && touching < items.len(), "{touching}");
+        let batch: Vec<_> = items
+            .iter()
+            .map(|&(a, pa, b, pb)| (&bodies[a].1, &poses[pa], &bodies[b].1, &poses[pb]))
+            .collect();
+        let mut tested = Vec::new();
+        for groups in [0, 1, 2, 5] {
+            ctx.set_one_pass(groups);
+            // Buffers that hold the batch: a re-run here is a fall-back to the chain.
+            let mut scratch = QueryScratch::with_capacity(1 << 18, 1 << 16);
+            let got = ctx
+                .collide_batch(&batch, &mut scratch)
+                .unwrap_or_else(|e| panic!("{groups} workgroups: {e}"));
+            let at = format!("leaves {leaves:?}, {groups} workgroups");
+            for (k, (r, w)) in got.results.iter().zip(&want).enumerate() {
+                assert_eq!(&r.pairs, w, "{at}, pair {k} {:?}", items[k]);
+            }
+            if leaves.len() > 1 {
+                assert_eq!(got.reruns, 0, "{at}: re-run");
+            }
+            tested.push(got.node_pairs_tested);
+        }
+        assert!(tested.iter().all(|&t| t == tested[0]), "{tested:?}");
+    }
+}
+
 /// Issue 10 item 3: recorded into the caller's encoder, submitted by the caller, resolved by
 /// waiting on that submission only.
 #[test]
