@@ -487,7 +487,7 @@ struct Prepared {
     /// Workgroups of the one-pass traversal, 0 for the level chain ([`GpuContext::set_one_pass`]);
     /// set to 0 when a one-pass run ran out of its loop budget (`ONE_PASS_LOOP_BUDGET`), so the
     /// re-run takes the level chain.
-    one_pass: std::sync::atomic::AtomicU32,
+    one_pass: u32,
     /// Box tests the CPU made descending the front, and the time it took.
     host_tests: u64,
     host_steps: u32,
@@ -497,7 +497,7 @@ struct Prepared {
 impl Prepared {
     /// Workgroups of the one-pass traversal for the next run, 0 for the level chain.
     fn one_pass(&self) -> u32 {
-        self.one_pass.load(std::sync::atomic::Ordering::Relaxed)
+        self.one_pass
     }
 }
 
@@ -778,10 +778,14 @@ impl PendingBatch<'_> {
     /// Reads the answer of a batch whose encoder the caller submitted as `submission` (the
     /// index `Queue::submit` returned). Waits for that submission only. On a buffer overflow the
     /// batch is re-run on frcd-gpgpu's own submissions (counted in the answer).
-    pub fn resolve(self, submission: wgpu::SubmissionIndex) -> Result<GpuBatch, GpuError> {
+    pub fn resolve(mut self, submission: wgpu::SubmissionIndex) -> Result<GpuBatch, GpuError> {
         let mut answer = GpuBatch::default();
-        self.ctx
-            .run(&self.prepared, self.scratch, &mut answer, Some(submission))
+        self.ctx.run(
+            &mut self.prepared,
+            self.scratch,
+            &mut answer,
+            Some(submission),
+        )
     }
 }
 
@@ -865,9 +869,9 @@ impl GpuContext {
         if pairs.is_empty() {
             return Ok(GpuBatch::default());
         }
-        let prepared = self.prepare(pairs)?;
+        let mut prepared = self.prepare(pairs)?;
         let mut answer = GpuBatch::default();
-        self.run(&prepared, scratch, &mut answer, None)
+        self.run(&mut prepared, scratch, &mut answer, None)
     }
 
     /// Records a batch into the caller's command encoder (an engine's frame) and returns a
@@ -942,7 +946,7 @@ impl GpuContext {
             return Err(GpuError::ForeignObject("SubmittedBatch"));
         }
         let SubmittedBatch {
-            prepared,
+            mut prepared,
             mut scratch,
             index,
             ..
@@ -960,7 +964,7 @@ impl GpuContext {
             submissions: 1,
             ..GpuBatch::default()
         };
-        let out = self.run(&prepared, &mut scratch, &mut answer, Some(index))?;
+        let out = self.run(&mut prepared, &mut scratch, &mut answer, Some(index))?;
         Ok((out, scratch))
     }
 
@@ -985,7 +989,7 @@ impl GpuContext {
             leaf_pairs: 0,
             exact: self.exact_offsets,
             roots: Vec::new(),
-            one_pass: self.one_pass.into(),
+            one_pass: self.one_pass,
             host_tests: 0,
             host_steps: 0,
             host_time: std::time::Duration::ZERO,
@@ -1217,7 +1221,7 @@ impl GpuContext {
     /// submits its own), re-runs on overflow, and decides every reported pair exactly.
     fn run(
         &self,
-        p: &Prepared,
+        p: &mut Prepared,
         scratch: &mut QueryScratch,
         answer: &mut GpuBatch,
         mut first: Option<wgpu::SubmissionIndex>,
@@ -1269,7 +1273,7 @@ impl GpuContext {
                 log::debug!(
                     "frcd-gpgpu: the one-pass traversal ran out of its loop budget, re-running as the level chain"
                 );
-                p.one_pass.store(0, std::sync::atomic::Ordering::Relaxed);
+                p.one_pass = 0;
                 answer.reruns += 1;
                 continue;
             }
@@ -1455,7 +1459,7 @@ mod tests {
             leaf_pairs: 0,
             exact: false,
             roots: Vec::new(),
-            one_pass: 0.into(),
+            one_pass: 0,
             host_tests: 0,
             host_steps: 0,
             host_time: std::time::Duration::ZERO,
@@ -1569,7 +1573,7 @@ mod tests {
             leaf_pairs: 0,
             exact: false,
             roots: Vec::new(),
-            one_pass: 0.into(),
+            one_pass: 0,
             host_tests: 0,
             host_steps: 0,
             host_time: std::time::Duration::ZERO,
