@@ -491,8 +491,10 @@ fn step_poses(k: usize) -> Vec<(Pose, Pose)> {
 
 fn crossover(label: &str, sizes: &[String], cpu: &[f64], gpu: &[f64]) -> String {
     // The smallest size from which the GPU is faster at every larger size; rows where both
-    // times are below the timer's reach (10 µs) say nothing and end the run.
-    let faster = |i: usize| gpu[i] < cpu[i] && cpu[i].max(gpu[i]) >= 0.01;
+    // times are below the timer's reach (10 µs) say nothing: they end the run and give no
+    // best ratio (two near-zero times made a 1-body row's 0.50× the "best").
+    let timed = |i: usize| cpu[i].max(gpu[i]) >= 0.01;
+    let faster = |i: usize| gpu[i] < cpu[i] && timed(i);
     match (0..sizes.len()).rev().take_while(|&i| faster(i)).last() {
         Some(i) => format!(
             "crossover ({label}): GPU faster from {} on ({:.2} ms vs {:.2} ms)",
@@ -501,7 +503,7 @@ fn crossover(label: &str, sizes: &[String], cpu: &[f64], gpu: &[f64]) -> String 
         None => format!(
             "crossover ({label}): none in the measured range (GPU slower at the largest size; best ratio {:.2}×)",
             (0..sizes.len())
-                .filter(|&i| cpu[i] > 0.0)
+                .filter(|&i| cpu[i] > 0.0 && timed(i))
                 .map(|i| gpu[i] / cpu[i])
                 .fold(f64::INFINITY, f64::min)
         ),
@@ -1127,19 +1129,26 @@ pub fn run(mut o: Opts) -> Result<()> {
         )?;
         writeln!(md, "|---:|---:|---:|---:|---:|---:|---:|---:|")?;
         let opt = |x: Option<f64>| x.map_or("—".to_string(), |v| format!("{v:.2}"));
+        // A ratio of two times below the timer's reach (10 µs) says nothing.
+        let ratio = |gpu: f64, cpu: f64| {
+            if gpu.max(cpu) < 0.01 {
+                "—".to_string()
+            } else {
+                format!("{:.2}×", gpu / cpu)
+            }
+        };
         for r in &box_rows {
             writeln!(
                 md,
-                "| {} | {} | {} | {:.2} | {} | {:.2} | {:.2}× | {} |",
+                "| {} | {} | {} | {:.2} | {} | {:.2} | {} | {} |",
                 r.bodies,
                 r.pairs,
                 opt(r.cpu_all),
                 r.cpu,
                 opt(r.gpu_all),
                 r.gpu,
-                r.gpu / r.cpu,
-                r.gpu_all
-                    .map_or("—".to_string(), |a| format!("{:.2}×", r.gpu / a))
+                ratio(r.gpu, r.cpu),
+                r.gpu_all.map_or("—".to_string(), |a| ratio(r.gpu, a))
             )?;
         }
         let sizes: Vec<String> = box_rows
@@ -1620,6 +1629,9 @@ mod tests {
         let line = crossover("t", &sizes, &[0.0, 0.5, 0.5, 1.0], &[0.0, 0.1, 0.9, 2.0]);
         assert!(line.contains("none in the measured range"), "{line}");
         assert!(line.contains("0.20×"), "{line}");
+        // Both times below the timer's reach: no ratio from that row.
+        let line = crossover("t", &sizes, &[4e-6, 0.5, 0.5, 1.0], &[2e-6, 0.6, 0.9, 2.0]);
+        assert!(line.contains("best ratio 1.20×"), "{line}");
     }
 
     #[test]
