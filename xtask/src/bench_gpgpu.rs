@@ -1490,6 +1490,7 @@ fn checker_soak(n: usize, time: Duration) -> Result<()> {
     }
     drop(reference);
     let t0 = Instant::now();
+    let cpu0 = process_cpu_seconds();
     let mut count = 0u64;
     while t0.elapsed() < time {
         for poses in &frames {
@@ -1498,11 +1499,30 @@ fn checker_soak(n: usize, time: Duration) -> Result<()> {
         }
     }
     let secs = t0.elapsed().as_secs_f64();
+    let per_frame = |s: f64| s * 1e3 / count.max(1) as f64;
+    // The process's CPU time (all threads: the software driver's included) is steadier than
+    // the wall clock on a shared host; not known off Linux.
+    let cpu = match (cpu0, process_cpu_seconds()) {
+        (Some(a), Some(b)) => format!(", CPU time {:.3} ms per frame", per_frame(b - a)),
+        _ => String::new(),
+    };
     println!(
-        "checker soak, {n} parts: {count} GPGPU check frames in {secs:.1} s, {:.3} ms per frame",
-        secs * 1e3 / count.max(1) as f64
+        "checker soak, {n} parts: {count} GPGPU check frames in {secs:.1} s, {:.3} ms per frame{cpu}",
+        per_frame(secs)
     );
     Ok(())
+}
+
+/// CPU time this process has used, all threads (user and system), from `/proc/self/stat`;
+/// `None` where that file is missing or unreadable (not Linux).
+fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which may hold spaces, closed by the last ')'): utime and
+    // stime are the 12th and 13th, in clock ticks (USER_HZ, 100 on Linux).
+    let rest = stat.get(stat.rfind(')')? + 2..)?;
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
 }
 
 /// GPGPU `check_pipelined` per frame of the checker section in both orders of a call's work
