@@ -208,3 +208,107 @@ fn a_pipeline_of_another_checker_and_bad_poses_are_refused() {
     pipe.reset();
     assert!(b.check_pipelined(&frames[0], &mut pipe).unwrap().is_none());
 }
+
+/// A pair batch the GPU refuses at run time (two bodies whose boxes overlap near the world's
+/// origin while their poses are 1.2e11 apart, beyond what frcd-gpgpu accepts in f32: its typed
+/// `MagnitudeOutOfRange`): under `GpuPolicy::Auto` both `check` and `check_pipelined` answer
+/// every frame on the CPU, equal to the CPU backend's answers, and say so in the frame's notes;
+/// under `GpuPolicy::Require` both fail with `HybridError::Gpu` for the pair query, and a
+/// pipeline that failed holds no frame.
+#[test]
+fn a_pair_batch_the_gpu_refuses_falls_back_or_fails_in_both_modes() {
+    let far = 6.0e10;
+    let cube = shapes::cuboid(DVec3::splat(0.5));
+    let at = |x: f64| Pose::from_translation(DVec3::new(x, 0.0, 0.0));
+    let bodies = vec![
+        BodySpec {
+            name: "east".into(),
+            mesh: Arc::new(cube.transformed(&at(far))),
+            is_static: false,
+        },
+        BodySpec {
+            name: "west".into(),
+            mesh: Arc::new(cube.transformed(&at(-far))),
+            is_static: false,
+        },
+    ];
+    // East's cube slides past west's at the origin: touching, then apart.
+    let frames: Vec<Vec<Pose>> = (0..6)
+        .map(|f| vec![at(-far + 0.3 * f as f64), at(far)])
+        .collect();
+    let cpu = Checker::new(
+        bodies.clone(),
+        &[],
+        Options {
+            gpu: GpuPolicy::Off,
+            ..Options::default()
+        },
+    )
+    .unwrap();
+    let mut state = FrameState::default();
+    let want: Vec<_> = frames
+        .iter()
+        .map(|p| cpu.check(p, &mut state).unwrap().contacts)
+        .collect();
+    assert!(want.iter().filter(|c| !c.is_empty()).count() >= 3);
+    assert!(want.last().unwrap().is_empty());
+    let options = |gpu| Options {
+        backend: Backend::Gpgpu,
+        gpu,
+        ..Options::default()
+    };
+    let auto = match Checker::new(bodies.clone(), &[], options(GpuPolicy::Auto)) {
+        Err(HybridError::FeatureDisabled { .. }) => {
+            println!("SKIP refused batch: built without the 'gpgpu' feature");
+            return;
+        }
+        other => other.unwrap(),
+    };
+    if !auto.has_gpgpu() {
+        assert!(!gpu_required(), "FRCD_REQUIRE_GPU=1 but no GPGPU device");
+        println!("SKIP refused batch: no GPU adapter");
+        return;
+    }
+    let fell_back = |r: &FrameResult| r.notes.iter().any(|n| n.contains("pair query failed"));
+    let mut state = FrameState::default();
+    for (k, p) in frames.iter().enumerate() {
+        let r = auto.check(p, &mut state).unwrap();
+        assert_eq!(r.contacts, want[k], "check, frame {k}");
+        assert!(!want[k].is_empty() || r.contacts.is_empty());
+        if !want[k].is_empty() {
+            assert!(fell_back(&r), "check, frame {k}: {:?}", r.notes);
+        }
+    }
+    let mut pipe = Pipeline::new();
+    let mut got = Vec::new();
+    for p in &frames {
+        got.extend(auto.check_pipelined(p, &mut pipe).unwrap());
+    }
+    got.extend(auto.flush_pipelined(&mut pipe).unwrap());
+    assert_eq!(got.len(), frames.len());
+    for (k, r) in got.iter().enumerate() {
+        assert_eq!(r.contacts, want[k], "check_pipelined, frame {k}");
+        if !want[k].is_empty() {
+            assert!(fell_back(r), "check_pipelined, frame {k}: {:?}", r.notes);
+        }
+    }
+    let required = Checker::new(bodies, &[], options(GpuPolicy::Require)).unwrap();
+    let is_pair_query = |e: &HybridError| {
+        matches!(
+            e,
+            HybridError::Gpu {
+                stage: "pair query",
+                ..
+            }
+        )
+    };
+    let e = required
+        .check(&frames[0], &mut FrameState::default())
+        .unwrap_err();
+    assert!(is_pair_query(&e), "{e}");
+    let mut pipe = Pipeline::new();
+    let e = required.check_pipelined(&frames[0], &mut pipe).unwrap_err();
+    assert!(is_pair_query(&e), "{e}");
+    assert!(!pipe.is_holding());
+    assert!(required.flush_pipelined(&mut pipe).unwrap().is_none());
+}
