@@ -957,8 +957,9 @@ fn traverse_all(@builtin(workgroup_id) wid: vec3<u32>,
     var over = false;
     // The first level copied to this workgroup's first half, so that every level reads one
     // buffer (on llvmpipe a storage access is paid in full even where no lane takes it). A
-    // share above the region cannot happen (the CPU sizes the regions for the first level);
-    // it would record its demand and stop, as an overflowing level does.
+    // share above the region (roots beyond what the regions hold, whose level capacity need
+    // not be a multiple of G) records its demand and stops, as an overflowing level does; the
+    // CPU re-runs with larger buffers.
     if cur > region {
         atomicMax(&state.needed, min(cur, 0xffffffffu / groups) * groups);
         cur = 0u;
