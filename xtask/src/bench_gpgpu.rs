@@ -139,8 +139,8 @@ pub struct Opts {
     pub checker_pipeline_orders: bool,
     /// Checker section: after the timings, run only GPGPU `check` on the frames, over and over,
     /// for this many seconds (for a profiler such as `perf record` to see the GPGPU frame alone,
-    /// without the CPU backend's frames or the scene's setup in its samples); prints the frames
-    /// per second. Left out: not run.
+    /// without the CPU backend's frames or the scene's setup in its samples); prints the wall
+    /// and CPU time per frame. Left out: not run.
     #[arg(long = "checker-soak-s", value_name = "SECONDS")]
     pub checker_soak_s: Option<f64>,
     /// Time every GPU pass of the batches with GPU timestamps (where the adapter has
@@ -489,11 +489,14 @@ fn step_poses(k: usize) -> Vec<(Pose, Pose)> {
         .collect()
 }
 
+/// Milliseconds below which a time says nothing about a ratio (the timer's reach, 10 µs).
+const TIMER_REACH_MS: f64 = 0.01;
+
 fn crossover(label: &str, sizes: &[String], cpu: &[f64], gpu: &[f64]) -> String {
     // The smallest size from which the GPU is faster at every larger size; rows where both
-    // times are below the timer's reach (10 µs) say nothing: they end the run and give no
-    // best ratio (two near-zero times made a 1-body row's 0.50× the "best").
-    let timed = |i: usize| cpu[i].max(gpu[i]) >= 0.01;
+    // times are below the timer's reach say nothing: they end the run and give no best ratio
+    // (two near-zero times made a 1-body row's 0.50× the "best").
+    let timed = |i: usize| cpu[i].max(gpu[i]) >= TIMER_REACH_MS;
     let faster = |i: usize| gpu[i] < cpu[i] && timed(i);
     match (0..sizes.len()).rev().take_while(|&i| faster(i)).last() {
         Some(i) => format!(
@@ -516,6 +519,15 @@ pub fn run(mut o: Opts) -> Result<()> {
         o.levels.clear();
         o.frames.clear();
     }
+    // Refused before any work (`from_secs_f64` would panic on infinity and on overflow).
+    let soak = o
+        .checker_soak_s
+        .map(|s| {
+            Duration::try_from_secs_f64(s).map_err(|e| {
+                anyhow::anyhow!("--checker-soak-s {s}: not a duration in seconds ({e})")
+            })
+        })
+        .transpose()?;
     let load_start = load_average();
     let mut ctx = GpuContext::headless_with(&frcd_gpgpu::HeadlessOptions {
         pass_timers: o.pass_timers,
@@ -803,8 +815,8 @@ pub fn run(mut o: Opts) -> Result<()> {
         if o.checker_pipeline_orders {
             checker_pipeline_orders(n, o.runs, warm)?;
         }
-        if let Some(s) = o.checker_soak_s {
-            checker_soak(n, Duration::from_secs_f64(s.max(0.0)))?;
+        if let Some(time) = soak {
+            checker_soak(n, time)?;
         }
     }
 
@@ -1129,9 +1141,9 @@ pub fn run(mut o: Opts) -> Result<()> {
         )?;
         writeln!(md, "|---:|---:|---:|---:|---:|---:|---:|---:|")?;
         let opt = |x: Option<f64>| x.map_or("—".to_string(), |v| format!("{v:.2}"));
-        // A ratio of two times below the timer's reach (10 µs) says nothing.
+        // A ratio of two times below the timer's reach says nothing.
         let ratio = |gpu: f64, cpu: f64| {
-            if gpu.max(cpu) < 0.01 {
+            if gpu.max(cpu) < TIMER_REACH_MS {
                 "—".to_string()
             } else {
                 format!("{:.2}×", gpu / cpu)
@@ -1473,7 +1485,8 @@ fn checker_variants(
 }
 
 /// GPGPU `check` alone on the checker section's frames, over and over for `time`, after one
-/// sequence checked against the CPU backend (`--checker-soak-s`); prints frames per second.
+/// sequence checked against the CPU backend (`--checker-soak-s`); prints the wall and CPU time
+/// per frame.
 fn checker_soak(n: usize, time: Duration) -> Result<()> {
     use frcd_hybrid::{Checker, FrameState};
     let (bodies, frames) = checker_scene(n);

@@ -680,12 +680,7 @@ fn append_args(base: u32, k: u32) {
 // The triangle test of one listed pair: (pair, triangle of A, triangle of B | UNCERTAIN_FLAG,
 // 1 unless certainly disjoint), as input-mesh indices.
 fn test_listed(entry: vec4<u32>) -> vec4<u32> {
-    // The pose from its texels, the path and grid exponents (`PairInfo.fix`) from the fifth
-    // (a texel, not the pair table: see `poses`); the exact path's limbs are read from the pair
-    // table by `exact_w`.
-    load_pose(entry.x);
-    let w4 = textureLoad(poses, vec2<u32>((entry.x & 255u) * 5u + 4u, entry.x >> 8u), 0);
-    pose.fix = bitcast<vec4<i32>>(vec4<u32>(w4.yzw, 0u));
+    load_test_pose(entry.x);
     let lay = arena.tri_layout;
     let sa = slot(lay, 3u, pose.base.y + entry.y);
     let sb = slot(lay, 3u, pose.base.w + entry.z);
@@ -695,12 +690,27 @@ fn test_listed(entry: vec4<u32>) -> vec4<u32> {
     let b0 = texel(tris, sb, 0u);
     let b1 = texel(tris, sb, 1u);
     let b2 = texel(tris, sb, 2u);
-    let r = tri_pair(entry.x, a0, a1, a2, b0, b1, b2);
+    return reported(entry.x, a0, b0, tri_pair(entry.x, a0, a1, a2, b0, b1, b2));
+}
+
+// Pair p's pose for the triangle tests: the f32 pose from its texels, the path and grid
+// exponents (`PairInfo.fix`) from the fifth (a texel, not the pair table: see `poses`); the
+// exact path's limbs are read from the pair table by `exact_w`.
+fn load_test_pose(p: u32) {
+    load_pose(p);
+    let w4 = textureLoad(poses, vec2<u32>((p & 255u) * 5u + 4u, p >> 8u), 0);
+    pose.fix = bitcast<vec4<i32>>(vec4<u32>(w4.yzw, 0u));
+}
+
+// The output entry of pair p's triangles whose first texels are `a0` and `b0`, tested `r`:
+// (pair, triangle of A, triangle of B | UNCERTAIN_FLAG, 1 unless certainly disjoint), as
+// input-mesh indices.
+fn reported(p: u32, a0: vec4<f32>, b0: vec4<f32>, r: u32) -> vec4<u32> {
     var tag = u32(b0.w);
     if r == TRI_UNCERTAIN {
         tag = tag | UNCERTAIN_FLAG;
     }
-    return vec4<u32>(entry.x, u32(a0.w), tag, select(0u, 1u, r != TRI_DISJOINT));
+    return vec4<u32>(p, u32(a0.w), tag, select(0u, 1u, r != TRI_DISJOINT));
 }
 
 // One listed triangle pair per invocation: the triangle test, and the pair appended to the
@@ -899,9 +909,7 @@ fn list_leaf_pair(w: u32, first: u32, cap: u32, p: u32, na: Node, nb: Node) {
 // word): every triangle of A's leaf against every triangle of B's, each pair appended to the
 // output, as `test_listed` does for one pair, unless it is certainly disjoint.
 fn test_leaf_pair(entry: vec4<u32>) {
-    load_pose(entry.x);
-    let w4 = textureLoad(poses, vec2<u32>((entry.x & 255u) * 5u + 4u, entry.x >> 8u), 0);
-    pose.fix = bitcast<vec4<i32>>(vec4<u32>(w4.yzw, 0u));
+    load_test_pose(entry.x);
     let lay = arena.tri_layout;
     let first_a = entry.y & 0xffffffu;
     let count_a = (entry.y >> 24u) + 1u;
@@ -917,15 +925,11 @@ fn test_leaf_pair(entry: vec4<u32>) {
             let b0 = texel(tris, sb, 0u);
             let b1 = texel(tris, sb, 1u);
             let b2 = texel(tris, sb, 2u);
-            let r = tri_pair(entry.x, a0, a1, a2, b0, b1, b2);
-            if r != TRI_DISJOINT {
-                var tag = u32(b0.w);
-                if r == TRI_UNCERTAIN {
-                    tag = tag | UNCERTAIN_FLAG;
-                }
+            let t = reported(entry.x, a0, b0, tri_pair(entry.x, a0, a1, a2, b0, b1, b2));
+            if t.w != 0u {
                 let o = atomicAdd(&state.out, 1u);
                 if o < params.caps.y {
-                    out_all[o] = vec4<u32>(entry.x, u32(a0.w), tag, 0u);
+                    out_all[o] = vec4<u32>(t.xyz, 0u);
                 }
             }
         }

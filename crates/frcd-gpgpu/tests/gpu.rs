@@ -883,7 +883,6 @@ fn a_one_pass_run_past_its_loop_budget_reruns_as_the_level_chain() {
     }
     ctx.set_one_pass_loop_budget(frcd_gpgpu::ONE_PASS_LOOP_BUDGET);
     let again = ctx.collide_batch(&batch, &mut scratch).expect("one pass");
-
     assert_eq!(
         (again.reruns, again.node_pairs_tested),
         (0, fits.node_pairs_tested)
