@@ -308,9 +308,7 @@ const TRI_UNCERTAIN: u32 = 2u;
 
 // Sign of v when |v| > e for certain; 0 means "not certain" (NaN included).
 fn sgn(v: f32, e: f32) -> i32 {
-    if v > e { return 1; }
-    if v < -e { return -1; }
-    return 0;
+    return select(select(0, -1, v < -e), 1, v > e);
 }
 
 // Side of w against the plane of (x, y, z), as Guigue-Devillers compute it:
@@ -327,23 +325,32 @@ fn check_min_max(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
                  p2: vec3<f32>, q2: vec3<f32>, r2: vec3<f32>, e: f32) -> u32 {
     let v1 = sgn(dot(q2 - q1, cross(p2 - q1, p1 - q1)), e);
     let v2 = sgn(dot(r2 - p1, cross(p2 - p1, r1 - p1)), e);
-    if v1 > 0 || v2 > 0 { return TRI_DISJOINT; }
-    if v1 < 0 && v2 < 0 { return TRI_TOUCH; }
-    return TRI_UNCERTAIN;
+    let touch = select(TRI_UNCERTAIN, TRI_TOUCH, v1 < 0 && v2 < 0);
+    return select(touch, TRI_DISJOINT, v1 > 0 || v2 > 0);
 }
 
-// Second permutation step: make p2 the lone vertex of triangle 2 w.r.t. plane 1 (signs strict).
-fn tri_tri_3d(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
-              p2: vec3<f32>, q2: vec3<f32>, r2: vec3<f32>,
-              sp2: i32, sq2: i32, sr2: i32, e: f32) -> u32 {
-    if sp2 > 0 {
-        if sq2 > 0 { return check_min_max(p1, r1, q1, r2, p2, q2, e); }
-        if sr2 > 0 { return check_min_max(p1, r1, q1, q2, r2, p2, e); }
-        return check_min_max(p1, q1, r1, p2, q2, r2, e);
-    }
-    if sq2 < 0 { return check_min_max(p1, q1, r1, r2, p2, q2, e); }
-    if sr2 < 0 { return check_min_max(p1, q1, r1, q2, r2, p2, e); }
-    return check_min_max(p1, r1, q1, p2, q2, r2, e);
+// A triangle rotated so that its lone vertex against the other triangle's plane comes first
+// (the vertex whose sign differs from the other two; signs nonzero, not all equal), and whether
+// that vertex lies on the negative side.
+struct LoneFirst {
+    p: vec3<f32>,
+    q: vec3<f32>,
+    r: vec3<f32>,
+    negative: bool,
+}
+
+// Guigue-Devillers' permutation steps as selects, not branches: llvmpipe runs every branch of
+// an `if` under a mask, so the branching form (six rotations of triangle 1, each calling six
+// of triangle 2) paid 36 CHECK_MIN_MAXes per triangle pair where one is needed. The points
+// passed on are the same as the branching form's, so the arithmetic, and its bound, are too.
+fn lone_first(p: vec3<f32>, q: vec3<f32>, r: vec3<f32>, sp: i32, sq: i32, sr: i32) -> LoneFirst {
+    let r_lone = sq == sp;
+    let q_lone = !r_lone && sr == sp;
+    let s = select(select(sp, sq, q_lone), sr, r_lone);
+    return LoneFirst(select(select(p, q, q_lone), r, r_lone),
+                     select(select(q, r, q_lone), p, r_lone),
+                     select(select(r, p, q_lone), q, r_lone),
+                     s < 0);
 }
 
 // Decides whether triangle (p1, q1, r1) meets triangle (p2, q2, r2), both in A's frame (possibly
@@ -373,25 +380,20 @@ fn tri_tri_core(p1: vec3<f32>, q1: vec3<f32>, r1: vec3<f32>,
     let sp1 = sgn(orient(p2, q2, r2, p1), e);
     let sq1 = sgn(orient(p2, q2, r2, q1), e);
     let sr1 = sgn(orient(p2, q2, r2, r1), e);
-    if sp1 != 0 && sp1 == sq1 && sp1 == sr1 { return TRI_DISJOINT; }
     let sp2 = sgn(orient(p1, q1, r1, p2), e);
     let sq2 = sgn(orient(p1, q1, r1, q2), e);
     let sr2 = sgn(orient(p1, q1, r1, r2), e);
-    if sp2 != 0 && sp2 == sq2 && sp2 == sr2 { return TRI_DISJOINT; }
-    if sp1 == 0 || sq1 == 0 || sr1 == 0 || sp2 == 0 || sq2 == 0 || sr2 == 0 {
-        return TRI_UNCERTAIN;
-    }
+    let disjoint = (sp1 != 0 && sp1 == sq1 && sp1 == sr1) || (sp2 != 0 && sp2 == sq2 && sp2 == sr2);
+    let unsure = sp1 == 0 || sq1 == 0 || sr1 == 0 || sp2 == 0 || sq2 == 0 || sr2 == 0;
     // Generic case: both triangles strictly straddle the other's plane. Rotate triangle 1 so
     // that its lone vertex comes first; if it lies on the negative side, flip plane 2 by
-    // swapping q2 and r2.
-    if sp1 > 0 {
-        if sq1 > 0 { return tri_tri_3d(r1, p1, q1, p2, r2, q2, sp2, sr2, sq2, e); }
-        if sr1 > 0 { return tri_tri_3d(q1, r1, p1, p2, r2, q2, sp2, sr2, sq2, e); }
-        return tri_tri_3d(p1, q1, r1, p2, q2, r2, sp2, sq2, sr2, e);
-    }
-    if sq1 < 0 { return tri_tri_3d(r1, p1, q1, p2, q2, r2, sp2, sq2, sr2, e); }
-    if sr1 < 0 { return tri_tri_3d(q1, r1, p1, p2, q2, r2, sp2, sq2, sr2, e); }
-    return tri_tri_3d(p1, q1, r1, p2, r2, q2, sp2, sr2, sq2, e);
+    // swapping q2 and r2. Then the same for triangle 2, flipping plane 1 (q1 and r1).
+    let t1 = lone_first(p1, q1, r1, sp1, sq1, sr1);
+    let t2 = lone_first(p2, select(q2, r2, t1.negative), select(r2, q2, t1.negative),
+                        sp2, select(sq2, sr2, t1.negative), select(sr2, sq2, t1.negative));
+    let generic = check_min_max(t1.p, select(t1.q, t1.r, t2.negative),
+                                select(t1.r, t1.q, t2.negative), t2.p, t2.q, t2.r, e);
+    return select(select(generic, TRI_UNCERTAIN, unsure), TRI_DISJOINT, disjoint);
 }
 
 // ---- the exact path: W = R c_B + t - c_A in integer arithmetic ----

@@ -328,35 +328,34 @@ fn check_min_max(p1: V3, q1: V3, r1: V3, p2: V3, q2: V3, r2: V3, e: f32) -> u32 
     TRI_UNCERTAIN
 }
 
-#[allow(clippy::too_many_arguments)]
-fn tri_tri_3d(
-    p1: V3,
-    q1: V3,
-    r1: V3,
-    p2: V3,
-    q2: V3,
-    r2: V3,
-    sp2: i32,
-    sq2: i32,
-    sr2: i32,
-    e: f32,
-) -> u32 {
-    if sp2 > 0 {
-        if sq2 > 0 {
-            return check_min_max(p1, r1, q1, r2, p2, q2, e);
-        }
-        if sr2 > 0 {
-            return check_min_max(p1, r1, q1, q2, r2, p2, e);
-        }
-        return check_min_max(p1, q1, r1, p2, q2, r2, e);
+/// Mirror of the shader's `lone_first`: the triangle rotated so that its lone vertex (the one
+/// whose sign differs from the other two) comes first, and whether that vertex is on the
+/// negative side. Meaningful only for nonzero signs that are not all equal.
+fn lone_first(t: [V3; 3], s: [i32; 3]) -> ([V3; 3], bool) {
+    let [p, q, r] = t;
+    let [sp, sq, sr] = s;
+    if sq == sp {
+        ([r, p, q], sr < 0)
+    } else if sr == sp {
+        ([q, r, p], sq < 0)
+    } else {
+        ([p, q, r], sp < 0)
     }
-    if sq2 < 0 {
-        return check_min_max(p1, q1, r1, r2, p2, q2, e);
-    }
-    if sr2 < 0 {
-        return check_min_max(p1, q1, r1, q2, r2, p2, e);
-    }
-    check_min_max(p1, r1, q1, p2, q2, r2, e)
+}
+
+/// The six points, in order, that the generic case of `tri_tri_core` passes to
+/// `check_min_max` (the shader's selects): triangle 1 rotated to its lone vertex, plane 2
+/// flipped when that vertex is negative, then the same for triangle 2 and plane 1.
+fn canonical_points(a: [V3; 3], sa: [i32; 3], b: [V3; 3], sb: [i32; 3]) -> [V3; 6] {
+    let ([p1, q1, r1], neg1) = lone_first(a, sa);
+    let (b, sb) = if neg1 {
+        ([b[0], b[2], b[1]], [sb[0], sb[2], sb[1]])
+    } else {
+        (b, sb)
+    };
+    let ([p2, q2, r2], neg2) = lone_first(b, sb);
+    let (q1, r1) = if neg2 { (r1, q1) } else { (q1, r1) };
+    [p1, q1, r1, p2, q2, r2]
 }
 
 /// Main's `tri_tri` before issue 10's offsets (absolute f32 vertices, B rotated in f32): the
@@ -424,22 +423,9 @@ pub(crate) fn tri_tri_core(a: [V3; 3], b: [V3; 3], delta: f32) -> u32 {
     if sp1 == 0 || sq1 == 0 || sr1 == 0 || sp2 == 0 || sq2 == 0 || sr2 == 0 {
         return TRI_UNCERTAIN;
     }
-    if sp1 > 0 {
-        if sq1 > 0 {
-            return tri_tri_3d(r1, p1, q1, p2, r2, q2, sp2, sr2, sq2, e);
-        }
-        if sr1 > 0 {
-            return tri_tri_3d(q1, r1, p1, p2, r2, q2, sp2, sr2, sq2, e);
-        }
-        return tri_tri_3d(p1, q1, r1, p2, q2, r2, sp2, sq2, sr2, e);
-    }
-    if sq1 < 0 {
-        return tri_tri_3d(r1, p1, q1, p2, q2, r2, sp2, sq2, sr2, e);
-    }
-    if sr1 < 0 {
-        return tri_tri_3d(q1, r1, p1, p2, q2, r2, sp2, sq2, sr2, e);
-    }
-    tri_tri_3d(p1, q1, r1, p2, r2, q2, sp2, sr2, sq2, e)
+    let [p1, q1, r1, p2, q2, r2] =
+        canonical_points([p1, q1, r1], [sp1, sq1, sr1], [p2, q2, r2], [sp2, sq2, sr2]);
+    check_min_max(p1, q1, r1, p2, q2, r2, e)
 }
 
 /// `x 2^e` for an f32 `x` whose result is 0 or normal (the shader's `ldexp` where exact).
@@ -640,6 +626,85 @@ mod tests {
     use frcd_geom::{DQuat, DVec3, Pose, Triangle, shapes};
     use frcd_obb::{BuildOptions, ObbTree, RelativeFrame, oracle};
     use frcd_tritri::Method;
+
+    /// Guigue-Devillers' two permutation steps as the shader wrote them before they became
+    /// selects (six rotations of triangle 1, each with six of triangle 2): the points each
+    /// branch passed to CHECK_MIN_MAX.
+    fn branching_points(a: [V3; 3], sa: [i32; 3], b: [V3; 3], sb: [i32; 3]) -> [V3; 6] {
+        let [p1, q1, r1] = a;
+        let [p2, q2, r2] = b;
+        let [sp1, sq1, sr1] = sa;
+        let [sp2, sq2, sr2] = sb;
+        let step2 = |[p1, q1, r1]: [V3; 3], [p2, q2, r2]: [V3; 3], [sp2, sq2, sr2]: [i32; 3]| {
+            if sp2 > 0 {
+                if sq2 > 0 {
+                    return [p1, r1, q1, r2, p2, q2];
+                }
+                if sr2 > 0 {
+                    return [p1, r1, q1, q2, r2, p2];
+                }
+                return [p1, q1, r1, p2, q2, r2];
+            }
+            if sq2 < 0 {
+                return [p1, q1, r1, r2, p2, q2];
+            }
+            if sr2 < 0 {
+                return [p1, q1, r1, q2, r2, p2];
+            }
+            [p1, r1, q1, p2, q2, r2]
+        };
+        if sp1 > 0 {
+            if sq1 > 0 {
+                return step2([r1, p1, q1], [p2, r2, q2], [sp2, sr2, sq2]);
+            }
+            if sr1 > 0 {
+                return step2([q1, r1, p1], [p2, r2, q2], [sp2, sr2, sq2]);
+            }
+            return step2([p1, q1, r1], [p2, q2, r2], [sp2, sq2, sr2]);
+        }
+        if sq1 < 0 {
+            return step2([r1, p1, q1], [p2, q2, r2], [sp2, sq2, sr2]);
+        }
+        if sr1 < 0 {
+            return step2([q1, r1, p1], [p2, q2, r2], [sp2, sq2, sr2]);
+        }
+        step2([p1, q1, r1], [p2, r2, q2], [sp2, sr2, sq2])
+    }
+
+    /// The selects of `canonical_points` (the shader's `lone_first` and swaps) pass the same
+    /// points as the branching form for every generic sign pattern (36 of them: each
+    /// triangle's signs nonzero and not all equal).
+    #[test]
+    fn select_permutation_equals_the_branching_form() {
+        let point = |i: u8| V3 {
+            x: i as f32,
+            y: 0.0,
+            z: 0.0,
+        };
+        let (a, b) = (
+            [point(1), point(2), point(3)],
+            [point(4), point(5), point(6)],
+        );
+        let generic: Vec<[i32; 3]> = (0..8)
+            .map(|m| [0, 1, 2].map(|k| if m >> k & 1 == 1 { 1 } else { -1 }))
+            .filter(|s| !(s[0] == s[1] && s[1] == s[2]))
+            .collect();
+        assert_eq!(generic.len(), 6);
+        let mut checked = 0;
+        for &sa in &generic {
+            for &sb in &generic {
+                let got = canonical_points(a, sa, b, sb).map(|v| v.x as u8);
+                let want = branching_points(a, sa, b, sb).map(|v| v.x as u8);
+                assert_eq!(got, want, "signs {sa:?} {sb:?}");
+                // Each is a permutation within each triangle.
+                let mut first = got[..3].to_vec();
+                first.sort();
+                assert_eq!(first, [1, 2, 3]);
+                checked += 1;
+            }
+        }
+        assert_eq!(checked, 36);
+    }
 
     const MODES: [Rounding; 6] = [
         Rounding::Nearest,
