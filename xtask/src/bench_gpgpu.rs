@@ -132,6 +132,16 @@ pub struct Opts {
     /// alternated run by run with the default's in one process (answers checked equal).
     #[arg(long = "checker-recheck-uncertain")]
     pub checker_recheck_uncertain: bool,
+    /// Checker section: also time GPGPU `check` and `check_pipelined` with these variants of the
+    /// traversal shader (`frcd_gpgpu::SHADER_VARIANT_ENV`, set while each variant's checker is
+    /// built: `traverse.wgsl`'s `VARIANT`, which only a contrast build of the shader reads),
+    /// alternated run by run with variant 0 in one process (answers checked equal).
+    #[arg(
+        long = "checker-shader-variants",
+        value_name = "VARIANT,..",
+        value_delimiter = ','
+    )]
+    pub checker_shader_variants: Vec<u32>,
     /// Checker section: also time GPGPU `check_pipelined` in both orders of a call's work
     /// (`frcd_hybrid::Pipeline::set_decide_first`: frame k re-decided before or after frame
     /// k+1's batch is submitted), alternated run by run in one process (answers checked equal).
@@ -768,7 +778,8 @@ pub fn run(mut o: Opts) -> Result<()> {
     // Variants of the GPGPU options the checker section times against the default, in one
     // process.
     let (gpu, _) = checker_options();
-    let mut changes: Vec<(String, frcd_hybrid::Options)> = Vec::new();
+    // (name, options, shader variant): every change is timed against the default.
+    let mut changes: Vec<(String, frcd_hybrid::Options, u32)> = Vec::new();
     for &l in &o.checker_gpu_leaves {
         let options = frcd_hybrid::Options {
             gpu_build: Some(frcd_obb::BuildOptions {
@@ -777,14 +788,18 @@ pub fn run(mut o: Opts) -> Result<()> {
             }),
             ..gpu.clone()
         };
-        changes.push((format!("GPU leaves of {l}"), options));
+        changes.push((format!("GPU leaves of {l}"), options, 0));
     }
     for &t in &o.checker_host_front {
         let options = frcd_hybrid::Options {
             gpu_host_front: Some(t),
             ..gpu.clone()
         };
-        changes.push((format!("a CPU front of {t} box tests per level"), options));
+        changes.push((
+            format!("a CPU front of {t} box tests per level"),
+            options,
+            0,
+        ));
     }
     for &g in &o.checker_one_pass {
         for front in std::iter::once(None).chain(o.checker_host_front.iter().map(|&t| Some(t))) {
@@ -796,7 +811,7 @@ pub fn run(mut o: Opts) -> Result<()> {
             let front = front.map_or("the default CPU front".into(), |t| {
                 format!("a CPU front of {t} box tests per level")
             });
-            changes.push((format!("one pass of {g} workgroups, {front}"), options));
+            changes.push((format!("one pass of {g} workgroups, {front}"), options, 0));
         }
     }
     if o.checker_recheck_uncertain {
@@ -804,7 +819,10 @@ pub fn run(mut o: Opts) -> Result<()> {
             gpu_recheck_certified: false,
             ..gpu.clone()
         };
-        changes.push(("only the uncertain pairs re-decided".into(), options));
+        changes.push(("only the uncertain pairs re-decided".into(), options, 0));
+    }
+    for &v in &o.checker_shader_variants {
+        changes.push((format!("shader variant {v}"), gpu.clone(), v));
     }
     let mut checker_rows: Vec<CheckerRow> = Vec::new();
     for &n in &o.checker {
@@ -1402,7 +1420,7 @@ fn checker_variants(
     n: usize,
     runs: usize,
     warm: Duration,
-    changes: &[(String, frcd_hybrid::Options)],
+    changes: &[(String, frcd_hybrid::Options, u32)],
 ) -> Result<()> {
     use frcd_hybrid::{Checker, FrameState, Pipeline};
     let (bodies, frames) = checker_scene(n);
@@ -1412,8 +1430,18 @@ fn checker_variants(
         "default".to_string(),
         Checker::new(bodies.clone(), &[], gpu.clone())?,
     )];
-    for (name, o) in changes {
-        variants.push((name.clone(), Checker::new(bodies.clone(), &[], o.clone())?));
+    for (name, o, shader) in changes {
+        // The variant's pipelines read the variable when its context is created, here.
+        // SAFETY: no other thread of this process reads the environment while the checkers
+        // are built (the bench's threads are idle between timings).
+        if *shader != 0 {
+            unsafe { std::env::set_var(frcd_gpgpu::SHADER_VARIANT_ENV, shader.to_string()) };
+        }
+        let checker = Checker::new(bodies.clone(), &[], o.clone());
+        if *shader != 0 {
+            unsafe { std::env::remove_var(frcd_gpgpu::SHADER_VARIANT_ENV) };
+        }
+        variants.push((name.clone(), checker?));
     }
     let key = contact_keys;
     let mut states: Vec<FrameState> = variants.iter().map(|_| FrameState::default()).collect();

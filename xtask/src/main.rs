@@ -60,7 +60,8 @@ enum Suite {
     /// The image-space detector: run time against resolution against error.
     Image(bench_image::Opts),
     /// The GPGPU pipeline against the CPU OBB traversal by scene size.
-    Gpgpu(bench_gpgpu::Opts),
+    // Boxed: its options are most of the enum's size.
+    Gpgpu(Box<bench_gpgpu::Opts>),
     /// Run time against error of every backend and mode of the hybrid scheduler.
     Hybrid(bench_hybrid::Opts),
 }
@@ -94,7 +95,7 @@ fn main() -> Result<()> {
         Task::Bench { suite } => match suite {
             Suite::Tritri(o) => bench_tritri::run(o),
             Suite::Image(o) => bench_image::run(o),
-            Suite::Gpgpu(o) => bench_gpgpu::run(o),
+            Suite::Gpgpu(o) => bench_gpgpu::run(*o),
             Suite::Hybrid(o) => bench_hybrid::run(o),
         },
     }

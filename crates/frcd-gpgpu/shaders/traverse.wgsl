@@ -66,6 +66,11 @@ const UNCERTAIN_FLAG: u32 = 0x80000000u;
 // a context with the exact path off, where the integer work would be dead weight; a software
 // driver would otherwise run it under masks). The traverse pipeline does not use it.
 override EXACT_PATH: bool = true;
+// A measurement hook (`context::SHADER_VARIANT_ENV`): 0 in every pipeline a context makes
+// unless that variable says otherwise. A contrast build branches on it (`if VARIANT == 1u
+// { the change } else { the code it replaces }`) so that `cargo xtask bench gpgpu
+// --checker-shader-variants 1` times both run by run in one process. No shipped code reads it.
+override VARIANT: u32 = 0u;
 
 // State, Params, Arena and PairInfo come from the prelude (frcd-gpu).
 

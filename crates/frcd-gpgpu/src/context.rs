@@ -99,6 +99,25 @@ pub const EXACT_OFFSETS_ENV: &str = "FRCD_GPGPU_EXACT_OFFSETS";
 /// not call it.
 pub const ONE_PASS_ENV: &str = "FRCD_GPGPU_ONE_PASS";
 
+/// Environment variable that sets `traverse.wgsl`'s override constant `VARIANT` (a u32, 0 when
+/// unset) in the pipelines of new contexts: a measurement hook. A contrast build of the shader
+/// branches on it, `if VARIANT == 1u { the change } else { the code it replaces }`, and
+/// `cargo xtask bench gpgpu --checker-shader-variants 1` builds one checker per variant and
+/// times them run by run in one process (on a shared host separate processes differ by more
+/// than most changes measure). Shipped shaders never read it.
+pub const SHADER_VARIANT_ENV: &str = "FRCD_GPGPU_SHADER_VARIANT";
+
+/// [`SHADER_VARIANT_ENV`]'s value: 0 when unset; a value that is not a u32 is 0 with a warning.
+fn shader_variant() -> u32 {
+    let Ok(v) = std::env::var(SHADER_VARIANT_ENV) else {
+        return 0;
+    };
+    v.trim().parse().unwrap_or_else(|_| {
+        log::warn!("{SHADER_VARIANT_ENV}={v:?} is not a u32; shader variant 0 used");
+        0
+    })
+}
+
 /// Loop iterations one invocation of the one-pass traversal may run before its workgroup stops
 /// and the batch re-runs as the level chain. llvmpipe silently ends a shader invocation's
 /// loops once they have run 65,535 iterations in all (Mesa's `LP_MAX_TGSI_LOOP_ITERATIONS`):
@@ -379,7 +398,7 @@ impl GpuContext {
         let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
         let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let pipes = Pipelines::new(&device);
+        let pipes = Pipelines::new(&device, shader_variant());
         let arena = crate::mesh::Arena::new(&device, &pipes.arena_bgl, &limits, arena);
         let oom = pollster::block_on(oom.pop());
         let internal = pollster::block_on(internal.pop());
@@ -702,7 +721,8 @@ fn texture(binding: u32, sample_type: wgpu::TextureSampleType) -> wgpu::BindGrou
 }
 
 impl Pipelines {
-    fn new(device: &wgpu::Device) -> Self {
+    /// `variant`: `traverse.wgsl`'s `VARIANT` ([`SHADER_VARIANT_ENV`]).
+    fn new(device: &wgpu::Device, variant: u32) -> Self {
         let bgl = |label: &str, entries: &[wgpu::BindGroupLayoutEntry]| {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some(label),
@@ -826,38 +846,43 @@ impl Pipelines {
              layout: &wgpu::PipelineLayout,
              module: &wgpu::ShaderModule,
              entry: &str| specialized(label, layout, module, entry, &[]);
+        // traverse.wgsl's pipelines take the measurement hook's variant (0 unless asked).
+        let v = f64::from(variant);
         Self {
-            traverse: pipeline(
+            traverse: specialized(
                 "frcd-gpgpu traverse",
                 &trav_layout,
                 &traverse_mod,
                 "traverse",
+                &[("VARIANT", v)],
             ),
-            triangles: pipeline(
+            triangles: specialized(
                 "frcd-gpgpu triangles",
                 &trav_layout,
                 &traverse_mod,
                 "triangles",
+                &[("VARIANT", v)],
             ),
             triangles_rotated: specialized(
                 "frcd-gpgpu triangles (rotated path)",
                 &trav_layout,
                 &traverse_mod,
                 "triangles",
-                &[("EXACT_PATH", 0.0)],
+                &[("EXACT_PATH", 0.0), ("VARIANT", v)],
             ),
-            traverse_all: pipeline(
+            traverse_all: specialized(
                 "frcd-gpgpu one-pass traversal",
                 &one_pass_layout,
                 &traverse_mod,
                 "traverse_all",
+                &[("VARIANT", v)],
             ),
             traverse_all_rotated: specialized(
                 "frcd-gpgpu one-pass traversal (rotated path)",
                 &one_pass_layout,
                 &traverse_mod,
                 "traverse_all",
-                &[("EXACT_PATH", 0.0)],
+                &[("EXACT_PATH", 0.0), ("VARIANT", v)],
             ),
             one_pass_bgl,
             boxes: pipeline("frcd-gpgpu boxes", &boxes_layout, &boxes_mod, "overlap"),

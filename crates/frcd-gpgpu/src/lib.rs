@@ -72,7 +72,7 @@ mod sweep;
 pub use boxes::{BodyPairs, BoxScratch, SubmittedBoxes};
 pub use context::{
     EXACT_OFFSETS_ENV, GpuContext, HOST_FRONT_SOFTWARE, HeadlessOptions, ONE_PASS_ENV,
-    ONE_PASS_LOOP_BUDGET, ONE_PASS_SOFTWARE_MAX, Recheck, requirements,
+    ONE_PASS_LOOP_BUDGET, ONE_PASS_SOFTWARE_MAX, Recheck, SHADER_VARIANT_ENV, requirements,
 };
 pub use error::GpuError;
 pub use mesh::{ArenaOptions, GpuMesh, MAX_LEAF_TRIANGLES};
