@@ -1123,21 +1123,26 @@ pub fn run(mut o: Opts) -> Result<()> {
         )?;
         writeln!(
             md,
-            "| parts | triangles | contacts / frame | CPU backend ms / frame | GPGPU `check` ms / frame | GPGPU `check_pipelined` ms / frame | pipelined / plain | plain / CPU |"
+            "The three alternate run by run (every other run in reverse order); times are medians of the runs, ratios medians of the per-run ratios (robust to the host's drift during the measurement).\n"
         )?;
-        writeln!(md, "|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+        writeln!(
+            md,
+            "| parts | triangles | contacts / frame | CPU backend ms / frame | GPGPU `check` ms / frame | GPGPU `check_pipelined` ms / frame | pipelined / plain | plain / CPU | pipelined / CPU |"
+        )?;
+        writeln!(md, "|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
         for r in &checker_rows {
             writeln!(
                 md,
-                "| {} | {} | {:.1} | {:.2} | {:.2} | {:.2} | {:.2}× | {:.2}× |",
+                "| {} | {} | {:.1} | {:.2} | {:.2} | {:.2} | {:.2}× | {:.2}× | {:.2}× |",
                 r.parts,
                 r.triangles,
                 r.contacts,
                 r.cpu,
                 r.plain,
                 r.piped,
-                r.piped / r.plain,
-                r.plain / r.cpu
+                r.piped_vs_plain,
+                r.plain_vs_cpu,
+                r.piped_vs_cpu
             )?;
         }
         writeln!(md)?;
@@ -1279,11 +1284,15 @@ struct CheckerRow {
     cpu: f64,
     plain: f64,
     piped: f64,
+    /// Medians of the per-run ratios (the three alternate run by run).
+    plain_vs_cpu: f64,
+    piped_vs_cpu: f64,
+    piped_vs_plain: f64,
 }
 
 /// The checker section for `n` parts: per-frame time of a sequence of 8 frames, median of
-/// `runs` sequences, for the CPU backend, GPGPU `check` and GPGPU `check_pipelined`; answers
-/// checked equal frame by frame.
+/// `runs` sequences, for the CPU backend, GPGPU `check` and GPGPU `check_pipelined`, alternated
+/// run by run, with the medians of the per-run ratios; answers checked equal frame by frame.
 fn checker_row(n: usize, runs: usize, warm: Duration) -> Result<CheckerRow> {
     use frcd_hybrid::{Checker, FrameState, Pipeline};
     let (bodies, frames) = checker_scene(n);
@@ -1326,24 +1335,68 @@ fn checker_row(n: usize, runs: usize, warm: Duration) -> Result<CheckerRow> {
     // Where a frame's time goes: the reported stage times (broad, narrow) of every timed frame.
     let (mut cpu_stages, mut gpu_stages) = (Vec::new(), Vec::new());
     let stages = |r: &frcd_hybrid::FrameResult| (r.stages[0].time_us, r.stages[2].time_us);
-    let mut s1 = FrameState::default();
-    let cpu_ms = median_ms(runs, || {
+    let (mut s1, mut s2, mut pipe) = (
+        FrameState::default(),
+        FrameState::default(),
+        Pipeline::new(),
+    );
+    // One 8-frame sequence of the CPU backend (0), GPGPU `check` (1) or `check_pipelined` and
+    // its flush (2), in ms per frame; `record`: keep its frames' stage times.
+    let mut sequence = |k: usize, record: bool| {
+        let t0 = Instant::now();
         for poses in &frames {
-            let r = c_cpu.check(poses, &mut s1).expect("checked");
-            cpu_stages.push(stages(&r));
-            std::hint::black_box(r);
+            match k {
+                0 => {
+                    let r = c_cpu.check(poses, &mut s1).expect("checked");
+                    if record {
+                        cpu_stages.push(stages(&r));
+                    }
+                    std::hint::black_box(r);
+                }
+                1 => {
+                    let r = c_gpu.check(poses, &mut s2).expect("checked");
+                    if record {
+                        gpu_stages.push(stages(&r));
+                    }
+                    std::hint::black_box(r);
+                }
+                _ => {
+                    std::hint::black_box(
+                        c_pipe.check_pipelined(poses, &mut pipe).expect("checked"),
+                    );
+                }
+            }
         }
-    }) / nf;
-    let mut s2 = FrameState::default();
-    let (plain, untimed) = gpu_median_ms(runs, warm, || {
-        for poses in &frames {
-            let r = c_gpu.check(poses, &mut s2).expect("checked");
-            gpu_stages.push(stages(&r));
-            std::hint::black_box(r);
+        if k == 2 {
+            std::hint::black_box(c_pipe.flush_pipelined(&mut pipe).expect("checked"));
         }
-    });
-    let plain = plain / nf;
-    gpu_stages.drain(..untimed * frames.len());
+        t0.elapsed().as_secs_f64() * 1e3 / nf
+    };
+    // The three alternate run by run (every other run in reverse order), so that the host's
+    // drift during the measurement falls on all three alike and each run gives its own ratios;
+    // untimed sequences of all three first, for `warm` (at least one each: a hardware GPU
+    // leaves its idle clock).
+    let t0 = Instant::now();
+    loop {
+        (0..3).for_each(|k| {
+            sequence(k, false);
+        });
+        if t0.elapsed() >= warm {
+            break;
+        }
+    }
+    let mut times: [Vec<f64>; 3] = Default::default();
+    for run in 0..runs {
+        let order = if run % 2 == 0 { [0, 1, 2] } else { [2, 1, 0] };
+        for k in order {
+            times[k].push(sequence(k, true));
+        }
+    }
+    let ratio = |a: usize, b: usize| {
+        median_of(times[a].iter().zip(&times[b]).map(|(x, y)| x / y).collect())
+    };
+    let (plain_vs_cpu, piped_vs_cpu, piped_vs_plain) = (ratio(1, 0), ratio(2, 0), ratio(2, 1));
+    let [cpu_ms, plain, piped] = times.map(median_of);
     let median_stages = |v: &[(f64, f64)]| {
         let mid = |mut x: Vec<f64>| {
             x.sort_by(f64::total_cmp);
@@ -1359,16 +1412,8 @@ fn checker_row(n: usize, runs: usize, warm: Duration) -> Result<CheckerRow> {
     println!(
         "checker, {n} parts, median stage times per frame: CPU backend broad {cb:.2} ms, narrow {cn:.2} ms; GPGPU check broad (GPU box pass) {gb:.2} ms, narrow (one pair batch, exact re-decision, containment) {gn:.2} ms"
     );
-    let mut pipe = Pipeline::new();
-    let (piped, _) = gpu_median_ms(runs, warm, || {
-        for poses in &frames {
-            std::hint::black_box(c_pipe.check_pipelined(poses, &mut pipe).expect("checked"));
-        }
-        std::hint::black_box(c_pipe.flush_pipelined(&mut pipe).expect("checked"));
-    });
-    let piped = piped / nf;
     println!(
-        "checker, {n} parts ({triangles} triangles): cpu {cpu_ms:.2} ms, gpgpu check {plain:.2} ms, pipelined {piped:.2} ms per frame"
+        "checker, {n} parts ({triangles} triangles): cpu {cpu_ms:.2} ms, gpgpu check {plain:.2} ms, pipelined {piped:.2} ms per frame; per-run ratios (medians): check / cpu {plain_vs_cpu:.3}, pipelined / cpu {piped_vs_cpu:.3}, pipelined / check {piped_vs_plain:.3}"
     );
     Ok(CheckerRow {
         parts: n,
@@ -1377,6 +1422,9 @@ fn checker_row(n: usize, runs: usize, warm: Duration) -> Result<CheckerRow> {
         cpu: cpu_ms,
         plain,
         piped,
+        plain_vs_cpu,
+        piped_vs_cpu,
+        piped_vs_plain,
     })
 }
 
@@ -1423,6 +1471,9 @@ fn checker_variants(
     changes: &[(String, frcd_hybrid::Options, u32)],
 ) -> Result<()> {
     use frcd_hybrid::{Checker, FrameState, Pipeline};
+    if changes.iter().any(|(_, _, shader)| *shader != 0) {
+        refuse_ambient_shader_variant(std::env::var_os(frcd_gpgpu::SHADER_VARIANT_ENV))?;
+    }
     let (bodies, frames) = checker_scene(n);
     let (gpu, cpu) = checker_options();
     let reference = Checker::new(bodies.clone(), &[], cpu)?;
@@ -1432,8 +1483,11 @@ fn checker_variants(
     )];
     for (name, o, shader) in changes {
         // The variant's pipelines read the variable when its context is created, here.
-        // SAFETY: no other thread of this process reads the environment while the checkers
-        // are built (the bench's threads are idle between timings).
+        // SAFETY: `set_var` is sound only while no other thread reads or writes the
+        // environment. The bench's own threads (rayon's pool) are idle between timings; the
+        // software driver's worker threads exist by now, and Mesa reads its environment when
+        // a device is created, which happens on this thread. A measurement tool's shortcut:
+        // passing the variant through the context's options would remove the `unsafe`.
         if *shader != 0 {
             unsafe { std::env::set_var(frcd_gpgpu::SHADER_VARIANT_ENV, shader.to_string()) };
         }
@@ -1510,6 +1564,19 @@ fn checker_variants(
         }
     }
     Ok(())
+}
+
+/// Refuses `--checker-shader-variants` while [`frcd_gpgpu::SHADER_VARIANT_ENV`] is already set
+/// (`ambient`, the variable's value at start): the default checker would be built with that
+/// variant instead of the shipped shader, and every ratio would compare two variants.
+fn refuse_ambient_shader_variant(ambient: Option<std::ffi::OsString>) -> Result<()> {
+    match ambient {
+        Some(v) => bail!(
+            "{}={v:?} is set: --checker-shader-variants sets it per variant itself and times each against the shipped shader (variant 0), built without it; unset it first",
+            frcd_gpgpu::SHADER_VARIANT_ENV
+        ),
+        None => Ok(()),
+    }
 }
 
 /// GPGPU `check` alone on the checker section's frames, over and over for `time`, after one
@@ -1639,6 +1706,21 @@ fn checker_pipeline_orders(n: usize, runs: usize, warm: Duration) -> Result<()> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A shader variant already in the environment stops `--checker-shader-variants` with an
+    /// error naming the variable (its default checker would not be the shipped shader); an
+    /// unset one passes.
+    #[test]
+    fn an_ambient_shader_variant_is_refused() {
+        let e = refuse_ambient_shader_variant(Some("2".into()))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(frcd_gpgpu::SHADER_VARIANT_ENV) && e.contains("\"2\""),
+            "{e}"
+        );
+        assert!(refuse_ambient_shader_variant(None).is_ok());
+    }
 
     /// The clock query gives up on a tool that hangs (killing it) and reads one that answers.
     #[cfg(unix)]
