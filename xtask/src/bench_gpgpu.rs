@@ -132,6 +132,16 @@ pub struct Opts {
     /// alternated run by run with the default's in one process (answers checked equal).
     #[arg(long = "checker-recheck-uncertain")]
     pub checker_recheck_uncertain: bool,
+    /// Checker section: also time GPGPU `check` and `check_pipelined` with the box pass on the
+    /// GPU from these body counts on (`frcd_hybrid::Options::gpgpu_box_pass_min_bodies`; 0: the
+    /// GPU box pass always), alternated run by run with the default's in one process (answers
+    /// checked equal).
+    #[arg(
+        long = "checker-box-pass-min",
+        value_name = "BODIES,..",
+        value_delimiter = ','
+    )]
+    pub checker_box_pass_min: Vec<usize>,
     /// Checker section: also time GPGPU `check` and `check_pipelined` with these variants of the
     /// traversal shader (`frcd_gpgpu::SHADER_VARIANT_ENV`, set while each variant's checker is
     /// built: `traverse.wgsl`'s `VARIANT`, which only a contrast build of the shader reads),
@@ -821,6 +831,17 @@ pub fn run(mut o: Opts) -> Result<()> {
         };
         changes.push(("only the uncertain pairs re-decided".into(), options, 0));
     }
+    for &m in &o.checker_box_pass_min {
+        let options = frcd_hybrid::Options {
+            gpgpu_box_pass_min_bodies: m,
+            ..gpu.clone()
+        };
+        changes.push((
+            format!("the box pass on the GPU from {m} bodies"),
+            options,
+            0,
+        ));
+    }
     for &v in &o.checker_shader_variants {
         changes.push((format!("shader variant {v}"), gpu.clone(), v));
     }
@@ -1304,6 +1325,8 @@ fn checker_row(n: usize, runs: usize, warm: Duration) -> Result<CheckerRow> {
     let key = contact_keys;
     // Correctness first (and warm-up): the three agree on every frame.
     let mut contacts = 0usize;
+    // Where the GPGPU checker's broad phase ran (`Options::gpgpu_box_pass_min_bodies`).
+    let mut gpu_broad = "no frame";
     {
         let (mut s1, mut s2, mut pipe) = (
             FrameState::default(),
@@ -1317,6 +1340,10 @@ fn checker_row(n: usize, runs: usize, warm: Duration) -> Result<CheckerRow> {
             if key(&a) != key(&b) {
                 bail!("checker, {n} parts: GPGPU check differs from the CPU backend");
             }
+            gpu_broad = match b.stages[0].backend {
+                frcd_hybrid::StageBackend::Gpu => "GPU box pass",
+                _ => "CPU broad phase",
+            };
             contacts += a.contacts.len();
             piped.extend(c_pipe.check_pipelined(poses, &mut pipe)?);
             if let Some(p) = piped.last() {
@@ -1410,7 +1437,7 @@ fn checker_row(n: usize, runs: usize, warm: Duration) -> Result<CheckerRow> {
     let (cb, cn) = median_stages(&cpu_stages);
     let (gb, gn) = median_stages(&gpu_stages);
     println!(
-        "checker, {n} parts, median stage times per frame: CPU backend broad {cb:.2} ms, narrow {cn:.2} ms; GPGPU check broad (GPU box pass) {gb:.2} ms, narrow (one pair batch, exact re-decision, containment) {gn:.2} ms"
+        "checker, {n} parts, median stage times per frame: CPU backend broad {cb:.2} ms, narrow {cn:.2} ms; GPGPU check broad ({gpu_broad}) {gb:.2} ms, narrow (one pair batch, exact re-decision, containment) {gn:.2} ms"
     );
     println!(
         "checker, {n} parts ({triangles} triangles): cpu {cpu_ms:.2} ms, gpgpu check {plain:.2} ms, pipelined {piped:.2} ms per frame; per-run ratios (medians): check / cpu {plain_vs_cpu:.3}, pipelined / cpu {piped_vs_cpu:.3}, pipelined / check {piped_vs_plain:.3}"

@@ -40,7 +40,7 @@ struct Cli {
 pub enum BackendArg {
     /// CPU only: sweep and prune, OBB trees, exact triangle tests.
     Cpu,
-    /// GPU box pass and GPU pair traversal.
+    /// GPU pair traversal for every pair; the box pass on the GPU from 1,024 bodies.
     Gpgpu,
     /// Image-space accurate colliding set (fast mode).
     Image,

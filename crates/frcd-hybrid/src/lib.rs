@@ -8,7 +8,8 @@
 //!    static-static and excluded pairs: the broad phase of an [`frcd_obb::World`] kept in the
 //!    caller's [`FrameState`] (candidate pairs kept over grown boxes from frame to frame), or
 //!    the GPU box pass of `frcd-gpgpu` (feature `gpgpu`, a sort-and-sweep) from
-//!    [`CostModel::gpu_broad_min_bodies`] bodies on. Both equal the f64 box test. With a
+//!    [`CostModel::gpu_broad_min_bodies`] bodies on ([`Options::gpgpu_box_pass_min_bodies`]
+//!    on [`Backend::Gpgpu`]). Both equal the f64 box test. With a
 //!    clearance threshold the boxes are grown by it.
 //! 2. **Accurate colliding set (ACS)**, [`Accuracy::Fast`] only: the image-space pass of
 //!    `frcd-image` (feature `image`) on each RCS pair of closed meshes gives the triangles that

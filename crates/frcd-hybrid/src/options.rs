@@ -39,7 +39,9 @@ pub enum Backend {
     Hybrid,
     /// CPU only: sweep and prune, OBB trees, exact triangle tests.
     Cpu,
-    /// GPU box pass and GPU exact pair queries for every pair (feature `gpgpu`).
+    /// GPU exact pair queries for every pair, and the box pass on the GPU from
+    /// [`Options::gpgpu_box_pass_min_bodies`] bodies on (on the CPU below: the frame's
+    /// [`StageReport`](crate::StageReport)s say which ran; feature `gpgpu`).
     Gpgpu,
     /// Image-space ACS for every pair of closed meshes ([`Accuracy::Fast`] only; feature `image`).
     Image,
@@ -124,6 +126,16 @@ pub struct Options {
     /// an exact test per touching pair: 5-7 % of the 64-part checker frame on the software
     /// driver (lavapipe, 2026-12-02), 35 % of a 1.3M-triangle batch on an H200 (2026-11-27).
     pub gpu_recheck_certified: bool,
+    /// Backend GPGPU: the body count from which the box pass (the rough colliding set) runs on
+    /// the GPU; below it the CPU broad phase ([`frcd_obb::World`]) runs it, and a frame sends
+    /// the GPU one submission (its pair batch) instead of two (`0` or `2`: the GPU box pass
+    /// always). Default 1,024: on an NVIDIA H200 (2026-11-28) the GPU box pass first beat the
+    /// CPU broad phase at 1,024 scattered bodies (0.19 against 0.27 ms) and took 5x its
+    /// 0.03 ms at 256; on the software driver (lavapipe, 2 cores) it never wins, and in the
+    /// 64-part checker frame it cost 0.54 ms of GPGPU `check`'s 5.0 against the CPU broad
+    /// phase's 0.06 (2026-12-03). The answers are the same either way. The hybrid backend
+    /// chooses by its cost model instead ([`CostModel::gpu_broad_min_bodies`]).
+    pub gpgpu_box_pass_min_bodies: usize,
     /// OBB trees for the clearance distance searches, built only when a clearance threshold is
     /// set (`None`: the collision trees of [`Options::build`]). Default: at most 1 triangle per
     /// leaf: on the bogie demo the brake blocks' distance searches against the wheel treads
@@ -162,6 +174,7 @@ impl Default for Options {
             gpu_host_front: None,
             gpu_one_pass: None,
             gpu_recheck_certified: true,
+            gpgpu_box_pass_min_bodies: 1024,
             clearance_build: Some(BuildOptions {
                 max_leaf_triangles: 1,
                 ..BuildOptions::default()

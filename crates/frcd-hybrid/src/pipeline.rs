@@ -125,13 +125,14 @@ impl Pipeline {
         self.held.is_some()
     }
 
-    /// The order of a call's work: `true` re-decides frame k's GPU pairs while the GPU runs
-    /// frame k+1's box pass, before frame k+1's batch is submitted (the pass's latency is then
-    /// spent on the re-decision); `false` (the default) submits that batch first, so that the
-    /// re-decision overlaps its traversal. The answers are the same either way. On the 2-core
-    /// software-driver host (lavapipe, 2026-12-02) `true` took 1.01-1.09 of the default's time
-    /// on the 64-part checker frame (three runs of 21 in one process,
-    /// `cargo xtask bench gpgpu --checker-pipeline-orders`), so the default stays.
+    /// The order of a call's work: `true` re-decides frame k's GPU pairs before frame k+1's
+    /// batch is submitted (while the GPU runs frame k+1's box pass, when that pass runs on the
+    /// GPU: [`crate::Options::gpgpu_box_pass_min_bodies`]; its latency is then spent on the
+    /// re-decision); `false` (the default) submits that batch first, so that the re-decision
+    /// overlaps its traversal. The answers are the same either way. On the 2-core
+    /// software-driver host (lavapipe, 2026-12-02, the box pass then on the GPU) `true` took
+    /// 1.01-1.09 of the default's time on the 64-part checker frame (three runs of 21 in one
+    /// process, `cargo xtask bench gpgpu --checker-pipeline-orders`), so the default stays.
     pub fn set_decide_first(&mut self, decide_first: bool) {
         self.decide_first = decide_first;
     }

@@ -68,8 +68,11 @@ impl Checker {
         if let Some(g) = &self.gpgpu {
             let n = state.ids.len();
             let o = &self.options;
-            let use_gpu = o.backend == crate::Backend::Gpgpu
-                || o.cost.gpu_broad_min_bodies().is_some_and(|m| n >= m);
+            let use_gpu = if o.backend == crate::Backend::Gpgpu {
+                n >= o.gpgpu_box_pass_min_bodies
+            } else {
+                o.cost.gpu_broad_min_bodies().is_some_and(|m| n >= m)
+            };
             if use_gpu && n >= 2 {
                 let boxes: Vec<Aabb> = state
                     .ids

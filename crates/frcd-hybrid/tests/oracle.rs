@@ -320,6 +320,35 @@ fn exact_gpgpu_and_gpu_heavy_hybrid_equal_oracle() {
     };
     assert!(checker.has_gpgpu());
     assert_eq!(want, got);
+    // The box pass on the CPU below `gpgpu_box_pass_min_bodies` (by default for this scene's
+    // bodies) and on the GPU from it: the answers of the oracle, and each frame reports where
+    // its box pass ran.
+    let n = s.bodies.len();
+    for (min, backend) in [
+        (forced.gpgpu_box_pass_min_bodies, StageBackend::Cpu),
+        (n, StageBackend::Gpu),
+        (n + 1, StageBackend::Cpu),
+        (0, StageBackend::Gpu),
+    ] {
+        let options = Options {
+            gpgpu_box_pass_min_bodies: min,
+            ..forced.clone()
+        };
+        let checker = Checker::new(s.bodies.clone(), &s.exclude, options).unwrap();
+        let mut st = FrameState::default();
+        for poses in &s.frames {
+            let r = checker.check(poses, &mut st).unwrap();
+            assert_eq!(
+                r.stages[0].backend, backend,
+                "box pass from {min} of {n} bodies"
+            );
+            assert_eq!(
+                answer_of(&r),
+                truth(&s, poses),
+                "box pass from {min} bodies"
+            );
+        }
+    }
     // The GPU's own trees (leaves of 2 by default) or the collision trees (leaves of 4): the
     // same answers.
     let (want, got, _) = run(

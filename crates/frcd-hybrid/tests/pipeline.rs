@@ -139,45 +139,43 @@ fn pipelined_equals_plain_on_the_cpu() {
 
 #[test]
 fn pipelined_equals_plain_on_the_gpu() {
-    let options = Options {
-        backend: Backend::Gpgpu,
-        gpu: GpuPolicy::Require,
-        clearance: Some(0.2),
-        ..Options::default()
-    };
-    let (plain, piped, touching) = match compare(options) {
-        Err(HybridError::FeatureDisabled { .. }) => {
-            println!("SKIP pipelined GPU: built without the 'gpgpu' feature");
-            return;
-        }
-        Err(HybridError::Gpu { source, .. }) if !gpu_required() => {
-            println!("SKIP pipelined GPU: no GPU adapter ({source})");
-            return;
-        }
-        other => other.expect("gpgpu backend"),
-    };
-    assert!(plain.has_gpgpu() && piped.has_gpgpu());
-    assert!(touching >= 5, "{touching}");
-    // The same submissions in both modes: per frame the box pass (Backend::Gpgpu) and one pair
-    // batch, both submitted ahead of their frame in the pipelined mode (its broad phase runs
-    // once per frame, in the look-ahead) and none re-submitted.
+    // The box pass on the CPU (the default below 1,024 bodies) and on the GPU.
+    let mut submissions = Vec::new();
+    for box_pass_min in [1024, 0] {
+        let options = Options {
+            backend: Backend::Gpgpu,
+            gpu: GpuPolicy::Require,
+            clearance: Some(0.2),
+            gpgpu_box_pass_min_bodies: box_pass_min,
+            ..Options::default()
+        };
+        let (plain, piped, touching) = match compare(options.clone()) {
+            Err(HybridError::FeatureDisabled { .. }) => {
+                println!("SKIP pipelined GPU: built without the 'gpgpu' feature");
+                return;
+            }
+            Err(HybridError::Gpu { source, .. }) if !gpu_required() => {
+                println!("SKIP pipelined GPU: no GPU adapter ({source})");
+                return;
+            }
+            other => other.expect("gpgpu backend"),
+        };
+        assert!(plain.has_gpgpu() && piped.has_gpgpu());
+        assert!(touching >= 5, "{touching}");
+        // The same submissions in both modes: per frame one pair batch (and the box pass when
+        // it runs on the GPU), submitted ahead of their frame in the pipelined mode (its broad
+        // phase runs once per frame, in the look-ahead) and none re-submitted.
+        assert!(plain.gpu_submissions() > 0);
+        assert_eq!(piped.gpu_submissions(), plain.gpu_submissions());
+        submissions.push(plain.gpu_submissions());
+        // The other order of a call's work (frame k re-decided before frame k+1's batch is
+        // submitted): the same answers and submissions.
+        let (plain, piped, _) = compare_in(options, true).expect("gpgpu backend");
+        assert_eq!(piped.gpu_submissions(), plain.gpu_submissions());
+    }
+    // The same pair batches either way; the GPU box pass adds one submission per frame.
     let frames = scene().2.len() as u64;
-    assert!(
-        plain.gpu_submissions() >= frames,
-        "{}",
-        plain.gpu_submissions()
-    );
-    assert_eq!(piped.gpu_submissions(), plain.gpu_submissions());
-    // The other order of a call's work (frame k re-decided before frame k+1's batch is
-    // submitted): the same answers and submissions.
-    let options = Options {
-        backend: Backend::Gpgpu,
-        gpu: GpuPolicy::Require,
-        clearance: Some(0.2),
-        ..Options::default()
-    };
-    let (plain, piped, _) = compare_in(options, true).expect("gpgpu backend");
-    assert_eq!(piped.gpu_submissions(), plain.gpu_submissions());
+    assert_eq!(submissions[1], submissions[0] + frames, "{submissions:?}");
 }
 
 #[test]
