@@ -174,7 +174,7 @@ pub struct Opts {
     #[arg(long, value_name = "on|off", value_parser = parse_on_off)]
     pub exact_offsets: Option<bool>,
     /// Box tests per level the CPU may take off the GPU at the top of each batch's pair trees
-    /// (`GpuContext::set_host_front`; 0: none); left out, the context's default (2,048 on a
+    /// (`GpuContext::set_host_front`; 0: none); left out, the context's default (1,024 on a
     /// software adapter, 0 on a hardware one).
     #[arg(long = "host-front", value_name = "TESTS")]
     pub host_front: Option<u32>,

@@ -158,8 +158,12 @@ fn one_pass_default(info: &wgpu::AdapterInfo) -> u32 {
 }
 
 /// [`GpuContext::set_host_front`]'s default on software adapters: box tests per level the CPU
-/// takes off the GPU at the top of a batch's pair trees.
-pub const HOST_FRONT_SOFTWARE: u32 = 2048;
+/// takes off the GPU at the top of a batch's pair trees. 1,024 since 2026-12-03: with the
+/// one-pass traversal and the 64-part checker frame's box pass on the CPU, lavapipe (2 cores)
+/// took 0.957-0.967 of 2,048's time in GPGPU `check` over three runs of 31-51 alternated in
+/// one process (`check_pipelined` 0.944-1.005; 512 about the same, 4,096 1.02-1.06;
+/// `cargo xtask bench gpgpu --boxes-only --bodies 2 --checker-parts 64 --checker-host-front 512,1024`).
+pub const HOST_FRONT_SOFTWARE: u32 = 1024;
 
 /// The exact path's default for a new context: on for hardware adapters (on an H200 it cut the
 /// uncertain pairs 70-200× at no measurable cost to the triangle pass), off for software ones

@@ -108,7 +108,7 @@ pub struct Options {
     /// Box tests per level the CPU may take off the GPU at the top of each GPU pair batch
     /// (frcd-gpgpu's `GpuContext::set_host_front`, feature `gpgpu`): the batch's first
     /// levels, too small to fill a GPU, are descended on the CPU and each saves a dispatch;
-    /// the answers are the same. `None`: the context's default (2,048 on a software adapter
+    /// the answers are the same. `None`: the context's default (1,024 on a software adapter
     /// such as lavapipe, 0 on a hardware one); `Some(0)`: the GPU starts at the roots.
     pub gpu_host_front: Option<u32>,
     /// How the GPU pair batch traverses (frcd-gpgpu's `GpuContext::set_one_pass`, feature
