@@ -1298,6 +1298,45 @@ fn median_of(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
+/// The median of the per-run ratios `a[i] / b[i]` (robust to a host's drift during the runs,
+/// which falls on both alike).
+fn median_ratio(a: &[f64], b: &[f64]) -> f64 {
+    median_of(a.iter().zip(b).map(|(x, y)| x / y).collect())
+}
+
+/// Times `slots` kinds of work alternated run by run, as the checker sections do: untimed
+/// rounds of every slot while `warm` lasts (at least one: a hardware GPU leaves its idle
+/// clock), then `runs` rounds that time each slot once, every other round in reverse order so
+/// that no slot always goes first. `sequence(slot, timed)` runs one unit of a slot's work and
+/// returns its time; the result holds each slot's times, run by run.
+fn alternate(
+    runs: usize,
+    warm: Duration,
+    slots: usize,
+    mut sequence: impl FnMut(usize, bool) -> f64,
+) -> Vec<Vec<f64>> {
+    let t0 = Instant::now();
+    loop {
+        (0..slots).for_each(|k| {
+            sequence(k, false);
+        });
+        if t0.elapsed() >= warm {
+            break;
+        }
+    }
+    let mut times = vec![Vec::with_capacity(runs); slots];
+    for run in 0..runs {
+        let mut order: Vec<usize> = (0..slots).collect();
+        if run % 2 == 1 {
+            order.reverse();
+        }
+        for k in order {
+            times[k].push(sequence(k, true));
+        }
+    }
+    times
+}
+
 struct CheckerRow {
     parts: usize,
     triangles: usize,
@@ -1369,7 +1408,7 @@ fn checker_row(n: usize, runs: usize, warm: Duration) -> Result<CheckerRow> {
     );
     // One 8-frame sequence of the CPU backend (0), GPGPU `check` (1) or `check_pipelined` and
     // its flush (2), in ms per frame; `record`: keep its frames' stage times.
-    let mut sequence = |k: usize, record: bool| {
+    let sequence = |k: usize, record: bool| {
         let t0 = Instant::now();
         for poses in &frames {
             match k {
@@ -1399,31 +1438,12 @@ fn checker_row(n: usize, runs: usize, warm: Duration) -> Result<CheckerRow> {
         }
         t0.elapsed().as_secs_f64() * 1e3 / nf
     };
-    // The three alternate run by run (every other run in reverse order), so that the host's
-    // drift during the measurement falls on all three alike and each run gives its own ratios;
-    // untimed sequences of all three first, for `warm` (at least one each: a hardware GPU
-    // leaves its idle clock).
-    let t0 = Instant::now();
-    loop {
-        (0..3).for_each(|k| {
-            sequence(k, false);
-        });
-        if t0.elapsed() >= warm {
-            break;
-        }
-    }
-    let mut times: [Vec<f64>; 3] = Default::default();
-    for run in 0..runs {
-        let order = if run % 2 == 0 { [0, 1, 2] } else { [2, 1, 0] };
-        for k in order {
-            times[k].push(sequence(k, true));
-        }
-    }
-    let ratio = |a: usize, b: usize| {
-        median_of(times[a].iter().zip(&times[b]).map(|(x, y)| x / y).collect())
-    };
+    // The three alternate run by run, so that the host's drift during the measurement falls
+    // on all three alike and each run gives its own ratios.
+    let times = alternate(runs, warm, 3, sequence);
+    let ratio = |a: usize, b: usize| median_ratio(&times[a], &times[b]);
     let (plain_vs_cpu, piped_vs_cpu, piped_vs_plain) = (ratio(1, 0), ratio(2, 0), ratio(2, 1));
-    let [cpu_ms, plain, piped] = times.map(median_of);
+    let [cpu_ms, plain, piped] = [0, 1, 2].map(|k| median_of(times[k].clone()));
     let median_stages = |v: &[(f64, f64)]| {
         let mid = |mut x: Vec<f64>| {
             x.sort_by(f64::total_cmp);
@@ -1555,35 +1575,11 @@ fn checker_variants(
         }
         t0.elapsed().as_secs_f64() * 1e3 / nf
     };
-    let slots = 2 * nv;
-    // A hardware GPU first leaves its idle clock (as every GPU timing of this bench does).
-    let t0 = Instant::now();
-    while t0.elapsed() < warm {
-        (0..slots).for_each(|k| {
-            sequence(k);
-        });
-    }
-    let mut times: Vec<Vec<f64>> = vec![Vec::new(); slots];
-    for run in 0..runs {
-        // Every other run in reverse order, so that no variant always goes first.
-        let mut order: Vec<usize> = (0..slots).collect();
-        if run % 2 == 1 {
-            order.reverse();
-        }
-        for k in order {
-            times[k].push(sequence(k));
-        }
-    }
+    let times = alternate(runs, warm, 2 * nv, |k, _| sequence(k));
     let median = median_of;
     for (k, (name, _)) in variants.iter().enumerate() {
         for (call, slot, base) in [("check", k, 0), ("check_pipelined", nv + k, nv)] {
-            let ratio = median(
-                times[slot]
-                    .iter()
-                    .zip(&times[base])
-                    .map(|(a, b)| a / b)
-                    .collect(),
-            );
+            let ratio = median_ratio(&times[slot], &times[base]);
             println!(
                 "checker, {n} parts, GPGPU {call} with {name}: {:.2} ms per frame (median of {runs}), {ratio:.3}x the default (median of per-run ratios)",
                 median(times[slot].clone())
@@ -1708,20 +1704,9 @@ fn checker_pipeline_orders(n: usize, runs: usize, warm: Duration) -> Result<()> 
         std::hint::black_box(checker.flush_pipelined(&mut pipes[k]).expect("checked"));
         t0.elapsed().as_secs_f64() * 1e3 / nf
     };
-    let t0 = Instant::now();
-    while t0.elapsed() < warm {
-        sequence(0);
-        sequence(1);
-    }
-    let mut times = [Vec::new(), Vec::new()];
-    for run in 0..runs {
-        let order: [usize; 2] = if run % 2 == 0 { [0, 1] } else { [1, 0] };
-        for k in order {
-            times[k].push(sequence(k));
-        }
-    }
+    let times = alternate(runs, warm, 2, |k, _| sequence(k));
     let median = median_of;
-    let ratio = median(times[0].iter().zip(&times[1]).map(|(a, b)| a / b).collect());
+    let ratio = median_ratio(&times[0], &times[1]);
     println!(
         "checker, {n} parts, GPGPU check_pipelined: re-deciding first {:.2} ms, submitting first {:.2} ms per frame (medians of {runs}); first / second {ratio:.3} (median of per-run ratios)",
         median(times[0].clone()),
@@ -1733,6 +1718,27 @@ fn checker_pipeline_orders(n: usize, runs: usize, warm: Duration) -> Result<()> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `alternate` warms every slot up once untimed (no warm-up time asked), then times each
+    /// slot once per run, every other run in reverse order, and files each time under its
+    /// slot; `median_ratio` takes the per-run ratios' median.
+    #[test]
+    fn alternate_times_every_slot_once_a_run_in_alternating_order() {
+        let mut calls = Vec::new();
+        let mut clock = 0.0;
+        let times = alternate(3, Duration::ZERO, 3, |k, timed| {
+            calls.push((k, timed));
+            clock += 1.0;
+            clock + 10.0 * k as f64
+        });
+        let (f, t) = (false, true);
+        let order = [(0, f), (1, f), (2, f), (0, t), (1, t), (2, t)];
+        let back = [(2, t), (1, t), (0, t), (0, t), (1, t), (2, t)];
+        assert_eq!(calls, [&order[..], &back[..]].concat());
+        assert_eq!(times[0], [4.0, 9.0, 10.0]);
+        assert_eq!(times[2], [26.0, 27.0, 32.0]);
+        assert_eq!(median_ratio(&[2.0, 9.0, 3.0], &[1.0, 3.0, 3.0]), 2.0);
+    }
 
     /// A shader variant already in the environment stops `--checker-shader-variants` with an
     /// error naming the variable (its default checker would not be the shipped shader); an
